@@ -1,0 +1,1 @@
+//! RGB-D datasets: TUM, Replica, and the embedded synthetic room.

@@ -1,0 +1,1 @@
+//! Evaluation metrics (METHOD.md §9).

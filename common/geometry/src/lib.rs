@@ -1,0 +1,13 @@
+//! Camera model and rigid-body poses shared by every stage.
+//!
+//! Conventions (METHOD.md §2): pinhole intrinsics in the OpenCV pixel
+//! convention (pixel (u, v) has its centre at integer coordinates), poses
+//! stored camera-to-world as in TUM and Replica files, camera looking down +z.
+
+mod intrinsics;
+mod pose;
+
+pub use intrinsics::Intrinsics;
+pub use pose::{format_tum_pose, parse_tum_pose, pose_from_tum, Pose, PoseParseError};
+
+pub use nalgebra;

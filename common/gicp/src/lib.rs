@@ -1,0 +1,1 @@
+//! Generalized-ICP registration (METHOD.md §7).

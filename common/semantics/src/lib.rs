@@ -1,0 +1,1 @@
+//! Label tables and confidence-based 2D label consensus (METHOD.md §5).

@@ -1,0 +1,1 @@
+//! Message contract between pipeline processes.
