@@ -1,0 +1,1 @@
+//! Per-stage latency records, histograms and Chrome traces.
