@@ -25,7 +25,7 @@ pub struct PixelRun {
 /// Payload: consistent label map `u32[W·H]` | mapping `[u32; 2][mapping_count]` (ℓs → ℓt) |
 /// relabel runs [`PixelRun`]`[relabel_count]` | prune runs [`PixelRun`]`[prune_count]` |
 /// pixel indices `u32[pixel_count]`.
-#[derive(Debug, Clone, Copy, ZeroCopySend)]
+#[derive(Debug, Clone, Copy, Default, ZeroCopySend)]
 #[type_name("opengs::ConsensusHeader")]
 #[repr(C)]
 pub struct ConsensusHeader {

@@ -33,7 +33,7 @@ impl ControlCommand {
 }
 
 /// A control request or reply. Payload: UTF-8 text.
-#[derive(Debug, Clone, Copy, ZeroCopySend)]
+#[derive(Debug, Clone, Copy, Default, ZeroCopySend)]
 #[type_name("opengs::ControlHeader")]
 #[repr(C)]
 pub struct ControlHeader {

@@ -36,7 +36,7 @@ pub use services::{ServiceSpec, SERVICES};
 pub mod service {
     pub use crate::services::*;
 }
-pub use stamp::{now_ns, MessageKind, Stamp, SCHEMA_VERSION};
+pub use stamp::{now_ns, MessageKind, Stamp, Stamped, SCHEMA_VERSION};
 pub use telemetry::{StageName, TelemetryEvent, TelemetryHeader};
 
 /// Largest image side we accept; bounds every size computed from a header.

@@ -29,7 +29,7 @@ impl PoseStatus {
 }
 
 /// Tracker output for every frame. No payload.
-#[derive(Debug, Clone, Copy, ZeroCopySend)]
+#[derive(Debug, Clone, Copy, Default, ZeroCopySend)]
 #[type_name("opengs::PoseHeader")]
 #[repr(C)]
 pub struct PoseHeader {

@@ -25,7 +25,7 @@ pub struct LabelCompleteness {
 
 /// The mapper's GS Voting render at a keyframe pose (top-K stays in the mapper).
 /// Payload: label map `u32[W·H]` | [`LabelCompleteness`]`[label_count]`.
-#[derive(Debug, Clone, Copy, ZeroCopySend)]
+#[derive(Debug, Clone, Copy, Default, ZeroCopySend)]
 #[type_name("opengs::RenderHeader")]
 #[repr(C)]
 pub struct RenderHeader {

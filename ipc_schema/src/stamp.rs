@@ -25,7 +25,7 @@ pub enum MessageKind {
 /// All `*_ns` fields are CLOCK_MONOTONIC nanoseconds (one clock for every
 /// process on the machine), except `capture_ns` which is the dataset/sensor
 /// capture time.
-#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
+#[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
 #[repr(C)]
 pub struct Stamp {
     pub version: u32,
@@ -96,3 +96,30 @@ pub fn now_ns() -> u64 {
     unsafe { libc::clock_gettime(libc::CLOCK_MONOTONIC, &mut ts) };
     ts.tv_sec as u64 * 1_000_000_000 + ts.tv_nsec as u64
 }
+
+/// Every header starts with a [`Stamp`]; this gives generic code access to it.
+pub trait Stamped {
+    fn stamp(&self) -> &Stamp;
+    fn stamp_mut(&mut self) -> &mut Stamp;
+}
+
+macro_rules! impl_stamped {
+    ($($t:ty),*) => {$(
+        impl Stamped for $t {
+            fn stamp(&self) -> &Stamp { &self.stamp }
+            fn stamp_mut(&mut self) -> &mut Stamp { &mut self.stamp }
+        }
+    )*};
+}
+
+impl_stamped!(
+    crate::FrameHeader,
+    crate::PoseHeader,
+    crate::KeyframeHeader,
+    crate::SegmentsHeader,
+    crate::RenderHeader,
+    crate::ConsensusHeader,
+    crate::MapTargetHeader,
+    crate::TelemetryHeader,
+    crate::ControlHeader
+);

@@ -1,0 +1,175 @@
+//! Actions of each relation (METHOD.md §5): who gets which label, which Gaussians move.
+
+use std::collections::{BTreeMap, BTreeSet};
+
+use crate::intersection::Overlap;
+use crate::label_table::GlobalLabelTable;
+use crate::matching::Matching;
+use crate::output::{LabelTarget, RelabelInstruction};
+use crate::relation::Relation;
+
+/// What the decisions of one keyframe read: relations, areas and both confidences.
+pub(crate) struct Evidence<'a> {
+    pub matching: &'a Matching,
+    pub overlap: &'a Overlap,
+    /// C_s after the input confidence update.
+    pub conf_s: &'a BTreeMap<u32, f32>,
+    /// C_r as it was before this keyframe.
+    pub conf_r: &'a BTreeMap<u32, f32>,
+}
+
+/// Decisions of one keyframe before they are painted into pixels.
+#[derive(Default)]
+pub(crate) struct Decisions {
+    pub targets: BTreeMap<u32, (Relation, LabelTarget)>,
+    pub relabels: Vec<RelabelInstruction>,
+    /// Input label whose pixels form relabel region i.
+    pub input_regions: BTreeMap<u32, usize>,
+    /// Rendered label whose pixels form relabel region i.
+    pub rendered_regions: BTreeMap<u32, usize>,
+    /// Map labels identified as parts this keyframe (decayed once each).
+    pub parts: BTreeSet<u32>,
+    /// Whole merges won by the input: merged label → input confidence.
+    pub merged: Vec<(u32, f32)>,
+    pub refused: u32,
+}
+
+/// Σ c·n / Σ n (0 when the areas sum to 0).
+fn area_weighted_mean(items: impl Iterator<Item = (f32, u32)>) -> f64 {
+    let (num, den) = items.fold((0.0, 0.0), |(num, den), (c, n)| {
+        (num + f64::from(c) * f64::from(n), den + f64::from(n))
+    });
+    if den > 0.0 {
+        num / den
+    } else {
+        0.0
+    }
+}
+
+pub(crate) fn area(map: &BTreeMap<u32, u32>, label: u32) -> u32 {
+    map.get(&label).copied().unwrap_or(0)
+}
+
+pub(crate) fn conf(map: &BTreeMap<u32, f32>, label: u32) -> f32 {
+    map.get(&label).copied().unwrap_or(0.0)
+}
+
+impl Decisions {
+    /// Decides every input label; fresh labels are allocated from `table` here.
+    pub fn decide(e: &Evidence, table: &mut GlobalLabelTable) -> Self {
+        let mut d = Decisions::default();
+        for (&s, &r) in &e.matching.full {
+            d.targets.insert(s, (Relation::Full, LabelTarget::Label(r)));
+        }
+        let split_from = Self::decide_partial(e, &mut d);
+        Self::allocate_fresh(e, table, &split_from, &mut d);
+        Self::decide_whole(e, &mut d);
+        for &s in &e.matching.other {
+            d.targets
+                .insert(s, (Relation::Other, LabelTarget::Background));
+        }
+        d
+    }
+
+    /// Partial groups: returns the winning parts ℓs → ℓr that need a fresh label.
+    fn decide_partial(e: &Evidence, d: &mut Decisions) -> BTreeMap<u32, u32> {
+        let mut split_from = BTreeMap::new();
+        for (&r, parts) in &e.matching.partial {
+            let cr = conf(e.conf_r, r);
+            let mean = area_weighted_mean(
+                parts
+                    .iter()
+                    .map(|&s| (conf(e.conf_s, s), area(&e.overlap.input_area, s))),
+            );
+            for &s in parts {
+                // Map wins when C_r > C̄s; otherwise only parts with C_s > C_r split off.
+                if f64::from(cr) <= mean && conf(e.conf_s, s) > cr {
+                    split_from.insert(s, r);
+                } else {
+                    d.targets
+                        .insert(s, (Relation::Partial, LabelTarget::Label(r)));
+                }
+            }
+        }
+        split_from
+    }
+
+    /// Fresh labels for winning Partial parts and New segments, in increasing ℓs order.
+    fn allocate_fresh(
+        e: &Evidence,
+        table: &mut GlobalLabelTable,
+        split_from: &BTreeMap<u32, u32>,
+        d: &mut Decisions,
+    ) {
+        let mut order: Vec<u32> = split_from.keys().chain(&e.matching.new).copied().collect();
+        order.sort_unstable();
+        for s in order {
+            let allocated = table.allocate(None, 0.0, conf(e.conf_s, s));
+            match (split_from.get(&s), allocated) {
+                (Some(&r), Ok(t)) => {
+                    d.targets
+                        .insert(s, (Relation::Partial, LabelTarget::Label(t)));
+                    // Region = all pixels of the input part, not only those rendering ℓr.
+                    d.input_regions.insert(s, d.relabels.len());
+                    d.relabels.push(RelabelInstruction {
+                        from: r,
+                        to: t,
+                        pixels: Vec::new(),
+                    });
+                    d.parts.insert(r);
+                }
+                (Some(&r), Err(_)) => {
+                    d.refused += 1;
+                    d.targets
+                        .insert(s, (Relation::Partial, LabelTarget::Label(r)));
+                }
+                (None, Ok(t)) => {
+                    d.targets.insert(s, (Relation::New, LabelTarget::Label(t)));
+                }
+                (None, Err(_)) => {
+                    d.refused += 1;
+                    d.targets
+                        .insert(s, (Relation::New, LabelTarget::Background));
+                }
+            }
+        }
+    }
+
+    /// Whole matches: merge the rendered parts into the largest one, or let the input take them.
+    fn decide_whole(e: &Evidence, d: &mut Decisions) {
+        for (&s, parts) in &e.matching.whole {
+            let mean = area_weighted_mean(
+                parts
+                    .iter()
+                    .map(|&r| (conf(e.conf_r, r), area(&e.overlap.rendered_area, r))),
+            );
+            d.parts.extend(parts.iter().copied());
+            if f64::from(conf(e.conf_s, s)) > mean {
+                // Keep the largest part's id (ties: smallest id) so most Gaussians keep their label.
+                let Some(&merged) = parts
+                    .iter()
+                    .max_by_key(|&&r| (area(&e.overlap.rendered_area, r), u32::MAX - r))
+                else {
+                    continue;
+                };
+                d.targets
+                    .insert(s, (Relation::Whole, LabelTarget::Label(merged)));
+                d.merged.push((merged, conf(e.conf_s, s)));
+                // Region = all rendered pixels of the part, so the part's label leaves the view.
+                for &r in parts.iter().filter(|&&r| r != merged) {
+                    d.rendered_regions.insert(r, d.relabels.len());
+                    d.relabels.push(RelabelInstruction {
+                        from: r,
+                        to: merged,
+                        pixels: Vec::new(),
+                    });
+                }
+            } else {
+                d.targets.insert(
+                    s,
+                    (Relation::Whole, LabelTarget::RenderedParts(parts.clone())),
+                );
+            }
+        }
+    }
+}

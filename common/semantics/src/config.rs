@@ -1,0 +1,82 @@
+//! Thresholds and ablation switches of the label consensus (METHOD.md §5).
+
+use serde::{Deserialize, Serialize};
+
+use crate::error::{Result, SemanticsError};
+
+/// Consensus configuration; every threshold of METHOD.md §5 is here, none is a literal in code.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct ConsensusConfig {
+    /// τ1: Full match needs a ≥ τ1 and b ≥ τ1.
+    pub tau_full: f64,
+    /// τ2: the containing side of a Partial / Whole match needs ≥ τ2.
+    pub tau_part: f64,
+    /// τ3: the smallest overlap that still counts (Partial / Whole lower bound, New upper bound).
+    pub tau_min: f64,
+    /// δ: confidence lost by a map label each time it is identified as a part (§5.1).
+    pub part_decay: f32,
+    /// Cap on global labels per run (paper: 2000); see `GlobalLabelTable` for the full behaviour.
+    pub max_labels: usize,
+    /// θ in metres: counter Gaussians with a larger largest scale are pruned (§5.3).
+    pub counter_prune_scale: f32,
+    /// Ablation switch: segmentation counter pruning (§5.3).
+    pub enable_counter_pruning: bool,
+    /// Ablation switch: input confidence update from completeness (§5.2).
+    pub enable_confidence_update: bool,
+    /// Ablation switch: part label decay (§5.1).
+    pub enable_part_decay: bool,
+}
+
+impl Default for ConsensusConfig {
+    fn default() -> Self {
+        Self {
+            tau_full: 0.85,
+            tau_part: 0.9,
+            tau_min: 0.1,
+            part_decay: 0.06,
+            max_labels: 2000,
+            counter_prune_scale: 0.10,
+            enable_counter_pruning: true,
+            enable_confidence_update: true,
+            enable_part_decay: true,
+        }
+    }
+}
+
+impl ConsensusConfig {
+    /// Checks ranges: thresholds in (0, 1], τ3 < τ1 and τ3 < τ2, δ ≥ 0, θ > 0, cap ≥ 1.
+    pub fn validate(&self) -> Result<()> {
+        let in_unit = |x: f64| x.is_finite() && x > 0.0 && x <= 1.0;
+        if !in_unit(self.tau_full) || !in_unit(self.tau_part) || !in_unit(self.tau_min) {
+            return Err(SemanticsError::InvalidConfig(format!(
+                "thresholds must lie in (0, 1]: τ1={}, τ2={}, τ3={}",
+                self.tau_full, self.tau_part, self.tau_min
+            )));
+        }
+        if self.tau_min >= self.tau_full || self.tau_min >= self.tau_part {
+            return Err(SemanticsError::InvalidConfig(format!(
+                "τ3={} must be below τ1={} and τ2={}",
+                self.tau_min, self.tau_full, self.tau_part
+            )));
+        }
+        if !self.part_decay.is_finite() || self.part_decay < 0.0 {
+            return Err(SemanticsError::InvalidConfig(format!(
+                "part decay δ={} must be finite and ≥ 0",
+                self.part_decay
+            )));
+        }
+        if !self.counter_prune_scale.is_finite() || self.counter_prune_scale <= 0.0 {
+            return Err(SemanticsError::InvalidConfig(format!(
+                "counter prune scale θ={} must be finite and > 0",
+                self.counter_prune_scale
+            )));
+        }
+        if self.max_labels == 0 {
+            return Err(SemanticsError::InvalidConfig(
+                "max_labels must be ≥ 1".into(),
+            ));
+        }
+        Ok(())
+    }
+}

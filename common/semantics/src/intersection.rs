@@ -1,0 +1,59 @@
+//! Label areas |ℓ| and intersections I(ℓs, ℓr) from one pass over the pixels.
+
+use std::collections::BTreeMap;
+
+use crate::fast_hash::LabelMap;
+
+/// Pixel counts of both label maps and of every co-occurring (input, rendered) pair, 0 included.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Overlap {
+    /// |ℓs| per input label.
+    pub input_area: BTreeMap<u32, u32>,
+    /// |ℓr| per rendered label.
+    pub rendered_area: BTreeMap<u32, u32>,
+    /// I(ℓs, ℓr) per pair with at least one shared pixel, sorted by (ℓs, ℓr).
+    pub pairs: BTreeMap<(u32, u32), u32>,
+}
+
+impl Overlap {
+    /// Counts in one pass; equal-length slices are the caller's job (checked by the consensus).
+    pub fn count(input: &[u32], rendered: &[u32]) -> Self {
+        let mut runs: LabelMap<(u32, u32), u32> = LabelMap::default();
+        let mut pixels = input.iter().zip(rendered);
+        let Some((&s0, &r0)) = pixels.next() else {
+            return Self::default();
+        };
+        // Segment maps are piecewise constant: hashing once per run, not per pixel, keeps this fast.
+        let (mut current, mut run) = ((s0, r0), 1u32);
+        for (&s, &r) in pixels {
+            if (s, r) == current {
+                run += 1;
+            } else {
+                *runs.entry(current).or_insert(0) += run;
+                current = (s, r);
+                run = 1;
+            }
+        }
+        *runs.entry(current).or_insert(0) += run;
+
+        let mut overlap = Self::default();
+        for (&(s, r), &n) in &runs {
+            *overlap.input_area.entry(s).or_insert(0) += n;
+            *overlap.rendered_area.entry(r).or_insert(0) += n;
+            overlap.pairs.insert((s, r), n);
+        }
+        overlap
+    }
+
+    /// a = I/|ℓs| and b = I/|ℓr| of a pair (0 when either area is 0).
+    pub fn ratios(&self, s: u32, r: u32) -> (f64, f64) {
+        let i = f64::from(self.pairs.get(&(s, r)).copied().unwrap_or(0));
+        let area = |a: Option<&u32>| a.copied().map_or(0.0, f64::from);
+        let (ns, nr) = (
+            area(self.input_area.get(&s)),
+            area(self.rendered_area.get(&r)),
+        );
+        let div = |x: f64, n: f64| if n > 0.0 { x / n } else { 0.0 };
+        (div(i, ns), div(i, nr))
+    }
+}

@@ -1,0 +1,69 @@
+//! Plain-data result of one keyframe's consensus, ready to be sent to the mapper.
+
+use serde::{Deserialize, Serialize};
+
+use crate::relation::Relation;
+
+/// Where the pixels of one input label go in the consistent input label map.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub enum LabelTarget {
+    /// Every pixel of ℓs takes global label ℓt.
+    Label(u32),
+    /// Every pixel of ℓs becomes background 0.
+    Background,
+    /// Whole match lost by the input: a pixel takes its rendered label if that label is one of
+    /// these parts, else 0.
+    RenderedParts(Vec<u32>),
+}
+
+/// ℓs → ℓt for one input label.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct LabelAssignment {
+    pub input_label: u32,
+    pub relation: Relation,
+    pub target: LabelTarget,
+    /// C_s after the input confidence update (§5.2), the value the matching used.
+    pub confidence: f32,
+}
+
+/// Map Gaussians labelled `from` in the top-K lists of `pixels` get label `to` (METHOD.md §4).
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct RelabelInstruction {
+    pub from: u32,
+    pub to: u32,
+    /// Row-major pixel indices, increasing.
+    pub pixels: Vec<u32>,
+}
+
+/// Symmetric difference of a Full match's masks: look for Gaussians labelled `label` there (§5.3).
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct CounterPruneRegion {
+    pub label: u32,
+    /// Row-major pixel indices, increasing.
+    pub pixels: Vec<u32>,
+}
+
+/// Everything one keyframe's consensus produces.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+pub struct ConsensusOutput {
+    /// One entry per non-zero input label present in the map, sorted by input label.
+    pub assignments: Vec<LabelAssignment>,
+    /// Row-major W×H map of global labels (0 = background).
+    pub consistent_label_map: Vec<u32>,
+    /// Relabel instructions, to be applied in order.
+    pub relabels: Vec<RelabelInstruction>,
+    /// Counter-pruning regions (empty when the module is switched off).
+    pub counter_pruning: Vec<CounterPruneRegion>,
+    /// Fresh labels that the full label table refused (New → 0, Partial part kept on ℓr).
+    pub refused_allocations: u32,
+}
+
+impl ConsensusOutput {
+    /// Target of input label `input_label`, if it was present.
+    pub fn target_of(&self, input_label: u32) -> Option<&LabelTarget> {
+        self.assignments
+            .binary_search_by_key(&input_label, |a| a.input_label)
+            .ok()
+            .map(|i| &self.assignments[i].target)
+    }
+}

@@ -1,0 +1,245 @@
+//! The action of each relation on a 20×20 grid (400 px, rows of 20).
+
+mod common;
+
+use approx::assert_relative_eq;
+use common::{conf, consensus_with, Scene};
+use opengs_semantics::{ConsensusConfig, LabelTarget, RelabelInstruction, Relation};
+
+fn config() -> ConsensusConfig {
+    ConsensusConfig::default()
+}
+
+#[test]
+fn full_match_takes_rendered_label_and_max_confidence() {
+    // (C_r before, C_s, C_r after)
+    let cases = [(0.5, 0.8, 0.8), (0.5, 0.3, 0.5), (0.7, 0.7, 0.7)];
+    for (cr, cs, expected) in cases {
+        let mut scene = Scene::new(20, 20);
+        scene.input_rows(0..10, 5, cs).rendered_rows(0..10, 1);
+        let mut consensus = consensus_with(&[cr], config());
+        let out = scene.run(&mut consensus);
+        assert_eq!(out.assignments[0].relation, Relation::Full);
+        assert_eq!(out.target_of(5), Some(&LabelTarget::Label(1)));
+        assert_eq!(&out.consistent_label_map[..200], &[1; 200][..]);
+        assert_eq!(&out.consistent_label_map[200..], &[0; 200][..]);
+        assert_relative_eq!(conf(&consensus, 1), expected);
+        assert!(out.relabels.is_empty());
+    }
+}
+
+/// Rendered 1 covers the grid; input 10 covers rows 0..split, input 11 rows split..20.
+fn partial_scene(split: usize, c10: f32, c11: f32) -> Scene {
+    let mut scene = Scene::new(20, 20);
+    scene.rendered_rows(0..20, 1);
+    scene
+        .input_rows(0..split, 10, c10)
+        .input_rows(split..20, 11, c11);
+    scene
+}
+
+#[test]
+fn partial_map_wins_when_its_confidence_beats_area_weighted_mean() {
+    // C̄s = (0.5·200 + 0.7·200)/400 = 0.6 < C_r = 0.9: every part → 1, no relabel, no decay.
+    let scene = partial_scene(10, 0.5, 0.7);
+    let mut consensus = consensus_with(&[0.9], config());
+    let out = scene.run(&mut consensus);
+    for label in [10, 11] {
+        assert_eq!(out.target_of(label), Some(&LabelTarget::Label(1)));
+    }
+    assert!(out.relabels.is_empty());
+    assert!(out.consistent_label_map.iter().all(|&l| l == 1));
+    assert_relative_eq!(conf(&consensus, 1), 0.9);
+}
+
+#[test]
+fn partial_uses_area_weighted_mean_not_plain_mean() {
+    // 160 px at 0.8 and 240 px at 0.3: C̄s = 0.5 (plain mean 0.55). C_r = 0.52 > 0.5: map wins.
+    let scene = partial_scene(8, 0.8, 0.3);
+    let mut consensus = consensus_with(&[0.52], config());
+    let out = scene.run(&mut consensus);
+    assert_eq!(out.target_of(10), Some(&LabelTarget::Label(1)));
+    assert_eq!(out.target_of(11), Some(&LabelTarget::Label(1)));
+    assert!(out.relabels.is_empty());
+}
+
+#[test]
+fn partial_parts_win_get_new_labels_and_relabel_instructions() {
+    // C̄s = (0.8·200 + 0.4·200)/400 = 0.6 ≥ C_r = 0.5: part 10 (0.8 > 0.5) gets fresh label 2,
+    // part 11 (0.4) stays on 1; label 1 is a part now and decays by δ.
+    let scene = partial_scene(10, 0.8, 0.4);
+    let mut consensus = consensus_with(&[0.5], config());
+    let out = scene.run(&mut consensus);
+    assert_eq!(out.target_of(10), Some(&LabelTarget::Label(2)));
+    assert_eq!(out.target_of(11), Some(&LabelTarget::Label(1)));
+    assert_eq!(
+        out.relabels,
+        vec![RelabelInstruction {
+            from: 1,
+            to: 2,
+            pixels: scene.rows(0..10)
+        }]
+    );
+    assert_eq!(&out.consistent_label_map[..200], &[2; 200][..]);
+    assert_eq!(&out.consistent_label_map[200..], &[1; 200][..]);
+    assert_relative_eq!(conf(&consensus, 1), 0.44);
+    assert_relative_eq!(conf(&consensus, 2), 0.8);
+}
+
+/// Input 20 covers the grid; rendered 1 rows 0..10 (C 0.4), rendered 2 rows 10..15 (C 0.5).
+fn whole_scene(cs: f32) -> Scene {
+    let mut scene = Scene::new(20, 20);
+    scene.input_rows(0..20, 20, cs);
+    scene.rendered_rows(0..10, 1).rendered_rows(10..15, 2);
+    scene
+}
+
+#[test]
+fn whole_input_wins_merges_parts_into_largest() {
+    // C̄r = (0.4·200 + 0.5·100)/300 = 0.433 < C_s = 0.6: parts merge into 1 (the largest).
+    let scene = whole_scene(0.6);
+    let mut consensus = consensus_with(&[0.4, 0.5], config());
+    let out = scene.run(&mut consensus);
+    assert_eq!(out.assignments[0].relation, Relation::Whole);
+    assert_eq!(out.target_of(20), Some(&LabelTarget::Label(1)));
+    assert_eq!(
+        out.relabels,
+        vec![RelabelInstruction {
+            from: 2,
+            to: 1,
+            pixels: scene.rows(10..15)
+        }]
+    );
+    assert!(out.consistent_label_map.iter().all(|&l| l == 1));
+    assert_relative_eq!(conf(&consensus, 1), 0.6); // merged label takes C_s
+    assert_relative_eq!(conf(&consensus, 2), 0.44); // part decayed
+}
+
+#[test]
+fn whole_input_loses_takes_rendered_parts() {
+    // C_s = 0.4 < C̄r = 0.433: pixels take the rendered parts, the rest → 0; parts decay.
+    let scene = whole_scene(0.4);
+    let mut consensus = consensus_with(&[0.4, 0.5], config());
+    let out = scene.run(&mut consensus);
+    assert_eq!(
+        out.target_of(20),
+        Some(&LabelTarget::RenderedParts(vec![1, 2]))
+    );
+    assert!(out.relabels.is_empty());
+    assert_eq!(&out.consistent_label_map[..200], &[1; 200][..]);
+    assert_eq!(&out.consistent_label_map[200..300], &[2; 100][..]);
+    assert_eq!(&out.consistent_label_map[300..], &[0; 100][..]);
+    assert_relative_eq!(conf(&consensus, 1), 0.34);
+    assert_relative_eq!(conf(&consensus, 2), 0.44);
+}
+
+#[test]
+fn new_segments_get_increasing_fresh_labels() {
+    // Table holds 1..=3; inputs 31 and 30 over unmapped space get 4 and 5 in input-label order.
+    let mut scene = Scene::new(20, 20);
+    scene.input_rows(0..5, 31, 0.7).input_rows(5..10, 30, 0.6);
+    scene.rendered_rows(10..20, 1);
+    let mut consensus = consensus_with(&[0.5, 0.5, 0.5], config());
+    let out = scene.run(&mut consensus);
+    assert_eq!(out.target_of(30), Some(&LabelTarget::Label(4)));
+    assert_eq!(out.target_of(31), Some(&LabelTarget::Label(5)));
+    assert!(out.assignments.iter().all(|a| a.relation == Relation::New));
+    assert_eq!(&out.consistent_label_map[..100], &[5; 100][..]);
+    assert_eq!(&out.consistent_label_map[100..200], &[4; 100][..]);
+    assert_relative_eq!(conf(&consensus, 4), 0.6);
+    assert_relative_eq!(conf(&consensus, 5), 0.7);
+}
+
+#[test]
+fn other_sends_pixels_to_background() {
+    let mut scene = Scene::new(20, 20);
+    scene.input_rows(5..15, 9, 0.9).input_rows(0..5, 8, 0.9);
+    scene.rendered_rows(0..10, 1).rendered_rows(10..20, 2);
+    let mut consensus = consensus_with(&[0.5, 0.5], config());
+    let out = scene.run(&mut consensus);
+    assert_eq!(out.target_of(9), Some(&LabelTarget::Background));
+    // Input 8 (rows 0..5) is a Partial part of 1: a = 1, b = 0.5.
+    assert_eq!(out.assignments[0].relation, Relation::Partial);
+    assert!(out.consistent_label_map[100..300].iter().all(|&l| l == 0));
+}
+
+#[test]
+fn decay_hits_only_part_labels() {
+    // Label 1: Full match (no decay). Label 2: Partial target that lost a part (decay).
+    // Label 3: Partial target whose map won (no decay). Label 4: not in view (no decay).
+    let mut scene = Scene::new(20, 20);
+    scene
+        .rendered_rows(0..4, 1)
+        .rendered_rows(4..12, 2)
+        .rendered_rows(12..20, 3);
+    scene.input_rows(0..4, 50, 0.9);
+    scene.input_rows(4..8, 51, 0.9).input_rows(8..12, 52, 0.2);
+    scene
+        .input_rows(12..16, 53, 0.2)
+        .input_rows(16..20, 54, 0.2);
+    let mut consensus = consensus_with(&[0.5, 0.5, 0.5, 0.5], config());
+    let out = scene.run(&mut consensus);
+    assert_eq!(out.target_of(50), Some(&LabelTarget::Label(1)));
+    assert_eq!(out.target_of(51), Some(&LabelTarget::Label(5)));
+    assert_eq!(out.target_of(52), Some(&LabelTarget::Label(2)));
+    assert_eq!(out.target_of(53), Some(&LabelTarget::Label(3)));
+    let expected = [(1, 0.9), (2, 0.44), (3, 0.5), (4, 0.5), (5, 0.9)];
+    for (label, c) in expected {
+        assert_relative_eq!(conf(&consensus, label), c, epsilon = 1e-6);
+    }
+    assert_eq!(consensus.table().get(2).map(|l| l.part_decays), Some(1));
+    assert_eq!(consensus.table().get(3).map(|l| l.part_decays), Some(0));
+}
+
+#[test]
+fn decay_never_goes_below_zero() {
+    let scene = whole_scene(0.01);
+    let mut consensus = consensus_with(&[0.03, 0.5], config());
+    scene.run(&mut consensus);
+    assert_eq!(conf(&consensus, 1), 0.0);
+}
+
+#[test]
+fn partial_part_splits_off_a_fully_matched_label() {
+    // Rendered 1 rows 0..20; input 5 rows 0..18 (Full: a = 1, b = 0.9); input 6 rows 18..20
+    // (Partial: a = 1, b = 0.1) with C_s 0.9 > C_r 0.5 → fresh label 2, relabel 1 → 2 there.
+    // The Full match's prune region is rows 18..20 (rendered 1 outside input 5).
+    let mut scene = Scene::new(20, 20);
+    scene.rendered_rows(0..20, 1);
+    scene.input_rows(0..18, 5, 0.6).input_rows(18..20, 6, 0.9);
+    let mut consensus = consensus_with(&[0.5], config());
+    let out = scene.run(&mut consensus);
+    assert_eq!(out.target_of(5), Some(&LabelTarget::Label(1)));
+    assert_eq!(out.target_of(6), Some(&LabelTarget::Label(2)));
+    assert_eq!(
+        out.relabels,
+        vec![RelabelInstruction {
+            from: 1,
+            to: 2,
+            pixels: scene.rows(18..20)
+        }]
+    );
+    assert_eq!(out.counter_pruning.len(), 1);
+    assert_eq!(out.counter_pruning[0].pixels, scene.rows(18..20));
+    // Full raised C_r to 0.6, then label 1 lost a part: 0.6 − 0.06.
+    assert_relative_eq!(conf(&consensus, 1), 0.54, epsilon = 1e-6);
+}
+
+#[test]
+fn whole_merge_ties_go_to_smallest_part_id() {
+    // Parts 3 and 2 have 100 px each: merged label is 2.
+    let mut scene = Scene::new(20, 20);
+    scene.input_rows(0..20, 9, 0.9);
+    scene.rendered_rows(0..5, 3).rendered_rows(5..10, 2);
+    let mut consensus = consensus_with(&[0.1, 0.1, 0.1], config());
+    let out = scene.run(&mut consensus);
+    assert_eq!(out.target_of(9), Some(&LabelTarget::Label(2)));
+    assert_eq!(
+        out.relabels,
+        vec![RelabelInstruction {
+            from: 3,
+            to: 2,
+            pixels: scene.rows(0..5)
+        }]
+    );
+}

@@ -1,0 +1,106 @@
+//! Relation boundaries of METHOD.md §5 (τ1 = 0.85, τ2 = 0.9, τ3 = 0.1) on both sides.
+
+mod common;
+
+use common::{consensus_with, Scene};
+use opengs_semantics::{pair_relation, ConsensusConfig, PairRelation, Relation};
+
+/// One input label (1) and one rendered label (1) laid out on a line:
+/// `s_only` input-only pixels, then `shared`, then `r_only` rendered-only pixels.
+struct Case {
+    name: &'static str,
+    s_only: usize,
+    shared: usize,
+    r_only: usize,
+    expected: Relation,
+}
+
+fn run_case(case: &Case) -> Relation {
+    let width = 100;
+    let total = case.s_only + case.shared + case.r_only;
+    let mut scene = Scene::new(width, total.div_ceil(width) + 1);
+    scene.input_span(0..case.s_only + case.shared, 1, 0.5);
+    scene.rendered_span(case.s_only..total, 1);
+    let mut consensus = consensus_with(&[0.5], ConsensusConfig::default());
+    let out = scene.run(&mut consensus);
+    assert_eq!(out.assignments.len(), 1, "{}", case.name);
+    out.assignments[0].relation
+}
+
+#[test]
+fn relation_boundaries_on_both_sides() {
+    use Relation::*;
+    #[rustfmt::skip]
+    let cases = [
+        // a = b = 340/400 = 0.85 exactly.
+        Case { name: "full: a = b = τ1", s_only: 60, shared: 340, r_only: 60, expected: Full },
+        // a = 339/400 = 0.8475, b = 1: not Full, rendered label inside input → Whole.
+        Case { name: "a just below τ1", s_only: 61, shared: 339, r_only: 0, expected: Whole },
+        Case { name: "a = 0.8499 (1e4 px)", s_only: 1501, shared: 8499, r_only: 0, expected: Whole },
+        Case { name: "a = 0.85 (1e4 px)", s_only: 1500, shared: 8500, r_only: 1500, expected: Full },
+        // a = 1, b = 0.85 → Full; b = 0.8475 → Partial.
+        Case { name: "full: b = τ1", s_only: 0, shared: 340, r_only: 60, expected: Full },
+        Case { name: "b just below τ1", s_only: 0, shared: 339, r_only: 61, expected: Partial },
+        // a = 0.85, b = 340/401: neither Full, Partial (a < τ2) nor Whole (b < τ2).
+        Case { name: "a = τ1, b below τ1", s_only: 60, shared: 340, r_only: 61, expected: Other },
+        // Partial: a = 360/400 = 0.9 = τ2; a = 359/400 below.
+        Case { name: "partial: a = τ2", s_only: 40, shared: 360, r_only: 200, expected: Partial },
+        Case { name: "a just below τ2", s_only: 41, shared: 359, r_only: 200, expected: Other },
+        // Partial: b = 40/400 = 0.1 = τ3; b = 39/400 below.
+        Case { name: "partial: b = τ3", s_only: 0, shared: 40, r_only: 360, expected: Partial },
+        Case { name: "b just below τ3", s_only: 0, shared: 39, r_only: 361, expected: Other },
+        // Whole: b = 0.9 = τ2; b = 359/400 below.
+        Case { name: "whole: b = τ2", s_only: 200, shared: 360, r_only: 40, expected: Whole },
+        Case { name: "b just below τ2", s_only: 200, shared: 359, r_only: 41, expected: Other },
+        // Whole: a = 40/400 = 0.1 = τ3; a = 39/400 below → New (a < τ3 for every ℓr).
+        Case { name: "whole: a = τ3", s_only: 360, shared: 40, r_only: 0, expected: Whole },
+        Case { name: "new: a just below τ3", s_only: 361, shared: 39, r_only: 0, expected: New },
+        Case { name: "new: no overlap", s_only: 400, shared: 0, r_only: 100, expected: New },
+    ];
+    for case in &cases {
+        assert_eq!(run_case(case), case.expected, "{}", case.name);
+    }
+}
+
+#[test]
+fn pair_relation_table() {
+    let cfg = ConsensusConfig::default();
+    let cases = [
+        (0.85, 0.85, Some(PairRelation::Full)),
+        (1.0, 0.8499, Some(PairRelation::Partial)),
+        (0.9, 0.1, Some(PairRelation::Partial)),
+        (0.8999, 0.5, None),
+        (0.9, 0.0999, None),
+        (0.1, 0.9, Some(PairRelation::Whole)),
+        (0.0999, 0.9, None),
+        (0.8499, 1.0, Some(PairRelation::Whole)),
+        (0.5, 0.5, None),
+    ];
+    for (a, b, expected) in cases {
+        assert_eq!(pair_relation(a, b, &cfg), expected, "a={a} b={b}");
+    }
+}
+
+#[test]
+fn full_has_priority_over_whole() {
+    // Input 1 covers rendered 1 (Full, a = 340/400) and contains rendered 2 (b = 1, a = 0.1).
+    let mut scene = Scene::new(20, 30);
+    scene.input_span(0..400, 1, 0.5);
+    scene.rendered_span(0..340, 1).rendered_span(340..380, 2);
+    let mut consensus = consensus_with(&[0.5, 0.5], ConsensusConfig::default());
+    let out = scene.run(&mut consensus);
+    assert_eq!(out.assignments[0].relation, Relation::Full);
+    assert!(out.relabels.is_empty());
+}
+
+#[test]
+fn other_when_segment_straddles_two_labels() {
+    // Input rows 5..15 cover half of rendered 1 (rows 0..10) and half of rendered 2.
+    let mut scene = Scene::new(20, 20);
+    scene.input_rows(5..15, 9, 0.9);
+    scene.rendered_rows(0..10, 1).rendered_rows(10..20, 2);
+    let mut consensus = consensus_with(&[0.5, 0.5], ConsensusConfig::default());
+    let out = scene.run(&mut consensus);
+    assert_eq!(out.assignments[0].relation, Relation::Other);
+    assert!(out.consistent_label_map.iter().all(|&l| l == 0));
+}

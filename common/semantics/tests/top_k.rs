@@ -1,0 +1,193 @@
+//! Top-K application (§4) and counter-pruning selection (§5.3) on a hand-built record.
+
+mod common;
+
+use common::{consensus_with, Scene};
+use opengs_semantics::{
+    apply_relabels, select_counter_gaussians, ConsensusConfig, CounterPruneRegion,
+    RelabelInstruction, SemanticsError, TopKView,
+};
+
+const K: usize = 3;
+/// Four pixels, K = 3 slots each (unused slots hold junk that must be ignored).
+const IDS: [u32; 12] = [0, 1, 2, 1, 3, 99, 4, 99, 99, 5, 99, 99];
+const COUNTS: [u8; 4] = [3, 2, 1, 1];
+/// Gaussian labels g0..g5.
+const LABELS: [u32; 6] = [1, 1, 2, 1, 1, 1];
+/// Largest scale (metres) of g0..g5.
+const MAX_SCALE: [f32; 6] = [0.05, 0.2, 0.5, 0.11, 0.3, 0.10];
+
+fn view() -> TopKView<'static> {
+    TopKView::new(K, &COUNTS, &IDS).expect("valid view")
+}
+
+#[test]
+fn counter_pruning_selection_table() {
+    // (θ, region label, region pixels, expected Gaussian ids)
+    let cases: [(f32, u32, &[u32], &[u32]); 6] = [
+        (0.10, 1, &[0, 1, 3], &[1, 3]), // g0 too small, g5 exactly θ (not above), g2 other label
+        (0.10, 1, &[0, 1, 2, 3], &[1, 3, 4]),
+        (0.25, 1, &[0, 1, 2], &[4]),
+        (0.10, 2, &[0], &[2]),
+        (0.01, 1, &[3], &[5]),
+        (0.10, 1, &[], &[]),
+    ];
+    for (theta, label, pixels, expected) in cases {
+        let regions = [CounterPruneRegion {
+            label,
+            pixels: pixels.to_vec(),
+        }];
+        let got = select_counter_gaussians(&view(), &LABELS, |g| MAX_SCALE[g], theta, &regions);
+        assert_eq!(
+            got.as_deref(),
+            Ok(expected),
+            "θ={theta} label={label} pixels={pixels:?}"
+        );
+    }
+}
+
+#[test]
+fn selection_is_sorted_and_unique_across_regions() {
+    let regions = [
+        CounterPruneRegion {
+            label: 1,
+            pixels: vec![1, 0],
+        },
+        CounterPruneRegion {
+            label: 1,
+            pixels: vec![0],
+        },
+    ];
+    let got = select_counter_gaussians(&view(), &LABELS, |g| MAX_SCALE[g], 0.1, &regions);
+    assert_eq!(got, Ok(vec![1, 3]));
+}
+
+#[test]
+fn relabel_changes_only_from_label_in_listed_pixels() {
+    let mut labels = LABELS;
+    let relabels = [RelabelInstruction {
+        from: 1,
+        to: 7,
+        pixels: vec![0, 1],
+    }];
+    assert_eq!(apply_relabels(&view(), &mut labels, &relabels), Ok(3));
+    assert_eq!(labels, [7, 7, 2, 7, 1, 1]);
+}
+
+#[test]
+fn relabel_instructions_apply_in_order() {
+    let mut labels = LABELS;
+    let relabels = [
+        RelabelInstruction {
+            from: 2,
+            to: 8,
+            pixels: vec![0],
+        },
+        RelabelInstruction {
+            from: 1,
+            to: 9,
+            pixels: vec![2, 3],
+        },
+    ];
+    assert_eq!(apply_relabels(&view(), &mut labels, &relabels), Ok(3));
+    assert_eq!(labels, [1, 1, 8, 1, 9, 9]);
+}
+
+#[test]
+fn bad_indices_are_errors_and_change_nothing() {
+    let mut labels = LABELS;
+    let relabels = [
+        RelabelInstruction {
+            from: 1,
+            to: 7,
+            pixels: vec![0],
+        },
+        RelabelInstruction {
+            from: 1,
+            to: 7,
+            pixels: vec![4],
+        },
+    ];
+    assert_eq!(
+        apply_relabels(&view(), &mut labels, &relabels),
+        Err(SemanticsError::PixelOutOfRange {
+            pixel: 4,
+            pixels: 4
+        })
+    );
+    assert_eq!(labels, LABELS);
+    // Only five Gaussians: id 5 in pixel 3 is out of range.
+    let mut short = [1u32; 5];
+    let relabels = [RelabelInstruction {
+        from: 1,
+        to: 7,
+        pixels: vec![3],
+    }];
+    assert_eq!(
+        apply_relabels(&view(), &mut short, &relabels),
+        Err(SemanticsError::GaussianOutOfRange {
+            id: 5,
+            gaussians: 5
+        })
+    );
+    let regions = [CounterPruneRegion {
+        label: 1,
+        pixels: vec![9],
+    }];
+    assert!(select_counter_gaussians(&view(), &LABELS, |g| MAX_SCALE[g], 0.1, &regions).is_err());
+}
+
+#[test]
+fn malformed_views_are_rejected() {
+    assert!(TopKView::new(3, &[1u8, 1], &[0; 5]).is_err());
+    assert!(TopKView::new(2, &[3u8], &[0; 2]).is_err());
+    assert!(TopKView::new(2, &[2u8, 0], &[0; 4]).is_ok());
+}
+
+#[test]
+fn full_match_prune_region_is_the_symmetric_difference() {
+    // 20×5 grid: input 10 on pixels 0..90, rendered 1 on 5..95 → a = b = 85/90: Full.
+    let mut scene = Scene::new(20, 5);
+    scene.input_span(0..90, 10, 0.9).rendered_span(5..95, 1);
+    let mut consensus = consensus_with(&[0.5], ConsensusConfig::default());
+    let out = scene.run(&mut consensus);
+    let expected: Vec<u32> = (0..5).chain(90..95).collect();
+    assert_eq!(
+        out.counter_pruning,
+        vec![CounterPruneRegion {
+            label: 1,
+            pixels: expected
+        }]
+    );
+}
+
+#[test]
+fn partial_split_applied_through_top_k() {
+    // Consensus on a 2×2 image: rendered 1 everywhere, input 5 on pixel 0 (a = 1, b = 0.25)
+    // beats C_r, so Gaussians labelled 1 in pixel 0's top-K move to the fresh label 2.
+    let mut scene = Scene::new(2, 2);
+    scene
+        .rendered_span(0..4, 1)
+        .input_span(0..1, 5, 0.9)
+        .input_span(1..4, 6, 0.1);
+    let mut consensus = consensus_with(&[0.2], ConsensusConfig::default());
+    let out = scene.run(&mut consensus);
+    let mut labels = [1, 1, 1, 1, 1, 1];
+    apply_relabels(&view(), &mut labels, &out.relabels).expect("valid");
+    assert_eq!(labels, [2, 2, 2, 1, 1, 1]);
+}
+
+#[test]
+fn u16_counts_work_too() {
+    let counts: [u16; 2] = [2, 1];
+    let ids = [0u32, 1, 2, 9];
+    let view = TopKView::new(2, &counts, &ids).expect("valid");
+    let mut labels = [4u32, 4, 4];
+    let relabels = [RelabelInstruction {
+        from: 4,
+        to: 5,
+        pixels: vec![0, 1],
+    }];
+    assert_eq!(apply_relabels(&view, &mut labels, &relabels), Ok(3));
+    assert_eq!(labels, [5, 5, 5]);
+}
