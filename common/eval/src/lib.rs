@@ -1,1 +1,13 @@
 //! Evaluation metrics (METHOD.md §9).
+
+pub mod ate;
+pub mod trajectory;
+
+pub use ate::{
+    absolute_trajectory_error, associate, ate_of_positions, umeyama_rigid, AteError, AteResult,
+    DEFAULT_MAX_TIME_DIFFERENCE,
+};
+pub use trajectory::{
+    format_tum_trajectory, parse_tum_trajectory, read_tum_trajectory, write_tum_trajectory,
+    TimedPose, TrajectoryError,
+};

@@ -8,6 +8,6 @@ mod intrinsics;
 mod pose;
 
 pub use intrinsics::Intrinsics;
-pub use pose::{format_tum_pose, parse_tum_pose, pose_from_tum, Pose, PoseParseError};
+pub use pose::{format_tum_pose, parse_tum_pose, pose_from_tum, pose_to_tum, Pose, PoseParseError};
 
 pub use nalgebra;

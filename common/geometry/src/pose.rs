@@ -17,7 +17,10 @@ pub enum PoseParseError {
 pub fn parse_tum_pose(text: &str) -> Result<Pose, PoseParseError> {
     let vals: Vec<f64> = text
         .split_whitespace()
-        .map(|t| t.parse::<f64>().map_err(|_| PoseParseError::NotANumber(t.to_string())))
+        .map(|t| {
+            t.parse::<f64>()
+                .map_err(|_| PoseParseError::NotANumber(t.to_string()))
+        })
         .collect::<Result<_, _>>()?;
     if vals.len() != 7 {
         return Err(PoseParseError::WrongCount {
@@ -84,5 +87,24 @@ mod tests {
             parse_tum_pose("1 2 3 0 0 0 0"),
             Err(PoseParseError::BadQuaternion)
         );
+    }
+}
+
+/// A pose as `[tx, ty, tz, qx, qy, qz, qw]` (TUM order), as messages carry it.
+pub fn pose_to_tum(p: &Pose) -> [f64; 7] {
+    let t = p.translation.vector;
+    let q = p.rotation.quaternion();
+    [t.x, t.y, t.z, q.i, q.j, q.k, q.w]
+}
+
+#[cfg(test)]
+mod array_tests {
+    use super::*;
+
+    #[test]
+    fn array_round_trip() {
+        let a = [0.5, -1.0, 2.0, 0.0, 0.0, 0.0, 1.0];
+        let p = pose_from_tum(&a).expect("valid");
+        assert_eq!(pose_to_tum(&p), a);
     }
 }

@@ -92,6 +92,22 @@ impl RunContext {
     pub fn leftover_files(&self) -> Vec<PathBuf> {
         leftover_files(&self.run_id)
     }
+
+    /// Removes the run's iceoryx2 domain segment (node counter), which iceoryx2
+    /// keeps by design. Call only when every process of the run has ended: the
+    /// prefix is private to this run, so no one else can be using it.
+    pub fn remove_domain_segment(&self) -> usize {
+        let mut removed = 0;
+        for path in self.leftover_files() {
+            let is_domain = path
+                .file_name()
+                .is_some_and(|n| n.to_string_lossy().ends_with(".global_mgmt"));
+            if is_domain && std::fs::remove_file(&path).is_ok() {
+                removed += 1;
+            }
+        }
+        removed
+    }
 }
 
 /// Files of run `run_id` left in `/dev/shm` and under the iceoryx2 root.

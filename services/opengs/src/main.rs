@@ -1,11 +1,60 @@
-use clap::Parser;
+//! `opengs`: the one user-facing command.
 
-/// opengs: open-set dense semantic SLAM with 3D Gaussian Splatting.
+mod cmd;
+
+use std::process::ExitCode;
+
+use clap::{Parser, Subcommand};
+
+/// Open-set dense semantic SLAM with 3D Gaussian Splatting, as a zero-copy
+/// multi-process pipeline. `opengs run` with no arguments runs the embedded
+/// synthetic scene end to end.
 #[derive(Parser)]
-#[command(version, about)]
-struct Cli {}
+#[command(version, about, long_about = None, propagate_version = true)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
 
-fn main() -> anyhow::Result<()> {
-    let _cli = Cli::parse();
-    Ok(())
+#[derive(Subcommand)]
+enum Command {
+    /// Run the pipeline on a dataset (default: the embedded synthetic room).
+    Run(cmd::run::RunArgs),
+    /// Talk to a running pipeline: status, stop.
+    Ctl(cmd::ctl::CtlArgs),
+    /// Print the per-stage latency table of a finished run.
+    Profile(cmd::profile::ProfileArgs),
+    /// Write the synthetic room as a TUM or Replica dataset with ground truth.
+    Synth(cmd::synth::SynthArgs),
+    /// Render colour, depth and labels of a Gaussian map (PLY) at a pose.
+    Render(cmd::render::RenderArgs),
+    /// Register two point clouds (PLY or `x y z` text) with G-ICP.
+    Register(cmd::register::RegisterArgs),
+    /// Benchmarks that print figures.
+    Bench(cmd::bench::BenchArgs),
+    /// (internal) subscriber side of `opengs bench ipc`.
+    #[command(hide = true)]
+    IpcSink(cmd::bench_ipc::SinkArgs),
+}
+
+fn main() -> ExitCode {
+    opengs_pipeline::logging::init("warn");
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Run(a) => cmd::run::run(a),
+        Command::Ctl(a) => cmd::ctl::run(a),
+        Command::Profile(a) => cmd::profile::run(a),
+        Command::Synth(a) => cmd::synth::run(a),
+        Command::Render(a) => cmd::render::run(a),
+        Command::Register(a) => cmd::register::run(a),
+        Command::Bench(a) => cmd::bench::run(a),
+        Command::IpcSink(a) => cmd::bench_ipc::run_sink(a),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
 }

@@ -1,1 +1,36 @@
-fn main() {}
+//! Sensor stage: streams a dataset's RGB-D frames into shared memory.
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use clap::Parser;
+use opengs_pipeline::sensor::{run_sensor, SensorArgs};
+use opengs_runtime::RunContext;
+
+#[derive(Parser)]
+#[command(about = "opengs sensor stage (started by `opengs run`)")]
+struct Args {
+    /// Run id that namespaces this run's shared-memory services.
+    #[arg(long)]
+    run_id: String,
+    /// Run directory (unused by the sensor; every stage accepts it).
+    #[arg(long)]
+    out: Option<PathBuf>,
+    #[command(flatten)]
+    sensor: SensorArgs,
+}
+
+fn main() -> ExitCode {
+    opengs_pipeline::logging::init("info");
+    let args = Args::parse();
+    let result = RunContext::new(&args.run_id)
+        .map_err(anyhow::Error::from)
+        .and_then(|ctx| run_sensor(&ctx, &args.sensor));
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("sensor: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}

@@ -1,0 +1,71 @@
+/// Which non-linear least-squares solver runs on SE(3).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Solver {
+    /// Solve `H δ = −b` and take the step.
+    #[default]
+    GaussNewton,
+    /// Solve `(H + λI) δ = −b`; accept steps that lower the error, adapting λ.
+    LevenbergMarquardt,
+}
+
+/// Registration settings. Defaults are METHOD §7's TUM-size values;
+/// [`RegistrationConfig::replica`] gives the Replica-size ones.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RegistrationConfig {
+    pub solver: Solver,
+    /// Correspondences farther apart than this (metres) are ignored: 0.03 TUM, 0.02 Replica.
+    pub max_correspondence_distance: f64,
+    /// Upper bound on solver iterations (64).
+    pub max_iterations: usize,
+    /// Stop when the update's rotation is below this (radians, 2e-3) …
+    pub rotation_epsilon: f64,
+    /// … and its translation below this (metres, 5e-4).
+    pub translation_epsilon: f64,
+    /// Squared distance (m²) under which a source point counts as overlapping
+    /// the target, for the keyframe rule: 1e-3 TUM, 5e-4 Replica.
+    pub overlapped_th: f64,
+    /// Fewer inlier correspondences than this is an error (3 fix a pose).
+    pub min_correspondences: usize,
+    /// Levenberg-Marquardt: initial damping λ (1e-3, as small_gicp).
+    pub lm_initial_lambda: f64,
+    /// Levenberg-Marquardt: λ is multiplied/divided by this (10).
+    pub lm_lambda_factor: f64,
+    /// Levenberg-Marquardt: attempts per iteration before giving up (10).
+    pub lm_max_inner_iterations: usize,
+    /// `H` whose smallest/largest eigenvalue ratio is below this is rank-deficient.
+    pub degeneracy_ratio: f64,
+}
+
+impl Default for RegistrationConfig {
+    fn default() -> Self {
+        Self::tum()
+    }
+}
+
+impl RegistrationConfig {
+    /// TUM-size images (METHOD §7).
+    pub fn tum() -> Self {
+        Self {
+            solver: Solver::GaussNewton,
+            max_correspondence_distance: 0.03,
+            max_iterations: 64,
+            rotation_epsilon: 2e-3,
+            translation_epsilon: 5e-4,
+            overlapped_th: 1e-3,
+            min_correspondences: 3,
+            lm_initial_lambda: 1e-3,
+            lm_lambda_factor: 10.0,
+            lm_max_inner_iterations: 10,
+            degeneracy_ratio: 1e-10,
+        }
+    }
+
+    /// Replica-size images (METHOD §7).
+    pub fn replica() -> Self {
+        Self {
+            max_correspondence_distance: 0.02,
+            overlapped_th: 5e-4,
+            ..Self::tum()
+        }
+    }
+}

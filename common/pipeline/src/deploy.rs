@@ -1,0 +1,233 @@
+//! Deploy files: which stage processes to start, in which order, pinned how.
+
+use std::path::{Path, PathBuf};
+
+use serde::Deserialize;
+
+/// What a stage is to the supervisor.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Default)]
+#[serde(rename_all = "lowercase")]
+pub enum StageRole {
+    /// Produces frames; its clean exit means end of data; restarted with `--start-frame`.
+    Source,
+    /// Consumes and produces messages until stopped.
+    #[default]
+    Worker,
+}
+
+/// One stage process.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct StageSpec {
+    pub name: String,
+    /// Executable name (looked up beside `opengs`) or path.
+    pub binary: String,
+    #[serde(default)]
+    pub args: Vec<String>,
+    #[serde(default)]
+    pub role: StageRole,
+    /// CPUs to pin the process to (edge boxes); empty = no pinning.
+    #[serde(default)]
+    pub cpus: Vec<usize>,
+    /// Niceness to apply (0 = unchanged; higher = lower priority).
+    #[serde(default)]
+    pub nice: i32,
+    /// Restarts allowed before the run is abandoned.
+    #[serde(default = "default_restart_limit")]
+    pub restart_limit: u32,
+}
+
+fn default_restart_limit() -> u32 {
+    3
+}
+
+fn default_startup_timeout() -> f64 {
+    30.0
+}
+
+fn default_drain_timeout() -> f64 {
+    10.0
+}
+
+/// A deploy file (`deploy/desktop.toml`, `deploy/edge.toml`).
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DeployFile {
+    #[serde(default)]
+    pub description: String,
+    /// Seconds a stage may take to report ready.
+    #[serde(default = "default_startup_timeout")]
+    pub startup_timeout_s: f64,
+    /// Seconds to wait, after end of data, for stages to finish their queues.
+    #[serde(default = "default_drain_timeout")]
+    pub drain_timeout_s: f64,
+    /// The stage whose completion of a frame ends its end-to-end latency.
+    pub terminal_stage: Option<String>,
+    /// Start order: consumers first, so no frame is published before its readers exist.
+    pub stages: Vec<StageSpec>,
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum DeployError {
+    #[error("deploy file {path}: {source}")]
+    Read {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    #[error("deploy file {path}: {message}")]
+    Parse { path: PathBuf, message: String },
+    #[error("deploy file {path}: {message}")]
+    Invalid { path: PathBuf, message: String },
+}
+
+/// The desktop deploy file, compiled in so `opengs run` works from any directory.
+pub const DESKTOP: &str = include_str!("../../../deploy/desktop.toml");
+/// The edge deploy file, compiled in.
+pub const EDGE: &str = include_str!("../../../deploy/edge.toml");
+
+impl DeployFile {
+    /// Reads a deploy file; `desktop` and `edge` name the built-in ones.
+    pub fn load(path: &Path) -> Result<Self, DeployError> {
+        let text = match path.to_str() {
+            Some("desktop") => DESKTOP.to_string(),
+            Some("edge") => EDGE.to_string(),
+            _ => std::fs::read_to_string(path).map_err(|e| DeployError::Read {
+                path: path.to_path_buf(),
+                source: e,
+            })?,
+        };
+        Self::parse(&text, path)
+    }
+
+    pub fn parse(text: &str, path: &Path) -> Result<Self, DeployError> {
+        let file: Self = toml::from_str(text).map_err(|e| DeployError::Parse {
+            path: path.to_path_buf(),
+            message: e.to_string(),
+        })?;
+        file.validate(path)?;
+        Ok(file)
+    }
+
+    fn validate(&self, path: &Path) -> Result<(), DeployError> {
+        let invalid = |message: String| DeployError::Invalid {
+            path: path.to_path_buf(),
+            message,
+        };
+        if self.stages.is_empty() {
+            return Err(invalid("no [[stages]]".into()));
+        }
+        let mut names = std::collections::BTreeSet::new();
+        for s in &self.stages {
+            if s.name.is_empty()
+                || s.name.len() > 16
+                || !s
+                    .name
+                    .chars()
+                    .all(|c| c.is_ascii_alphanumeric() || c == '_')
+            {
+                return Err(invalid(format!(
+                    "stage name '{}' must be 1-16 letters, digits or '_'",
+                    s.name
+                )));
+            }
+            if !names.insert(&s.name) {
+                return Err(invalid(format!("stage '{}' appears twice", s.name)));
+            }
+            if !(-20..=19).contains(&s.nice) {
+                return Err(invalid(format!(
+                    "stage '{}': nice {} outside -20..19",
+                    s.name, s.nice
+                )));
+            }
+            let ncpu = std::thread::available_parallelism().map_or(1, |n| n.get());
+            if let Some(c) = s.cpus.iter().find(|&&c| c >= 1024) {
+                return Err(invalid(format!(
+                    "stage '{}': cpu {c} does not exist",
+                    s.name
+                )));
+            }
+            if !s.cpus.is_empty() && s.cpus.iter().all(|&c| c >= ncpu) {
+                tracing::warn!(
+                    "stage '{}': none of cpus {:?} exist on this {ncpu}-cpu machine; not pinning",
+                    s.name,
+                    s.cpus
+                );
+            }
+        }
+        if self
+            .stages
+            .iter()
+            .filter(|s| s.role == StageRole::Source)
+            .count()
+            != 1
+        {
+            return Err(invalid(
+                "exactly one stage must have role = \"source\"".into(),
+            ));
+        }
+        if let Some(t) = &self.terminal_stage {
+            if !names.contains(t) {
+                return Err(invalid(format!("terminal_stage '{t}' is not a stage")));
+            }
+        }
+        if !(self.startup_timeout_s > 0.0 && self.drain_timeout_s >= 0.0) {
+            return Err(invalid("timeouts must be positive".into()));
+        }
+        Ok(())
+    }
+
+    pub fn source(&self) -> &StageSpec {
+        // validate() guarantees exactly one source.
+        self.stages
+            .iter()
+            .find(|s| s.role == StageRole::Source)
+            .unwrap_or(&self.stages[0])
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn built_in_files_parse() {
+        for name in ["desktop", "edge"] {
+            let d = DeployFile::load(Path::new(name)).expect(name);
+            assert_eq!(d.source().name, "sensor");
+        }
+        let edge = DeployFile::load(Path::new("edge")).expect("edge");
+        assert!(edge
+            .stages
+            .iter()
+            .any(|s| !s.cpus.is_empty() && s.nice != 0));
+    }
+
+    #[test]
+    fn bad_files_name_the_problem() {
+        let p = Path::new("x.toml");
+        let err = DeployFile::parse("stages = []", p).expect_err("empty");
+        assert!(err.to_string().contains("no [[stages]]"), "{err}");
+        let two_sources = r#"
+            [[stages]]
+            name = "a"
+            binary = "a"
+            role = "source"
+            [[stages]]
+            name = "b"
+            binary = "b"
+            role = "source"
+        "#;
+        assert!(DeployFile::parse(two_sources, p)
+            .expect_err("two")
+            .to_string()
+            .contains("exactly one"));
+        let typo = "[[stages]]\nname = \"a\"\nbinary = \"a\"\nrol = \"source\"\n";
+        let err = DeployFile::parse(typo, p).expect_err("typo");
+        assert!(err.to_string().contains("rol"), "{err}");
+        let bad_nice = "[[stages]]\nname = \"a\"\nbinary = \"a\"\nrole = \"source\"\nnice = 40\n";
+        assert!(DeployFile::parse(bad_nice, p)
+            .expect_err("nice")
+            .to_string()
+            .contains("nice"));
+    }
+}

@@ -1,0 +1,16 @@
+//! Pipeline glue with no algorithm in it: deploy files, the supervisor that
+//! starts, watches, restarts and stops stage processes, the sensor loop, and
+//! the run recorder. Stage binaries in `services/` call into this crate.
+
+pub mod dataset_args;
+pub mod deploy;
+pub mod logging;
+pub mod recorder;
+pub mod sensor;
+pub mod stage_process;
+pub mod status;
+pub mod supervisor;
+
+pub use dataset_args::DatasetArgs;
+pub use deploy::{DeployFile, StageSpec};
+pub use supervisor::{RunOptions, RunSummary, Supervisor};

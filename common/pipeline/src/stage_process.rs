@@ -1,0 +1,235 @@
+//! One stage as an OS process: spawn (pinned, niced, logging to a file), watch, stop.
+
+use std::os::unix::process::CommandExt;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, ExitStatus, Stdio};
+use std::time::{Duration, Instant};
+
+use crate::deploy::StageSpec;
+
+/// Where a stage is in its life.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum StageState {
+    Starting,
+    Ready,
+    /// Exited cleanly at end of data (sources) or on request.
+    Finished,
+    /// Dead, waiting for its restart back-off.
+    Restarting,
+    /// Dead with no restarts left.
+    Failed,
+    Stopped,
+}
+
+/// A stage process and its restart bookkeeping.
+pub struct StageProcess {
+    pub spec: StageSpec,
+    pub state: StageState,
+    pub restarts: u32,
+    pub processed: u64,
+    pub last_seq: Option<u64>,
+    child: Option<Child>,
+    pid: Option<u32>,
+    started_at: Instant,
+    restart_at: Option<Instant>,
+    log_path: PathBuf,
+}
+
+/// Finds a stage executable: an explicit path, else beside the running `opengs`, else on PATH.
+pub fn resolve_binary(binary: &str) -> PathBuf {
+    let p = Path::new(binary);
+    if p.components().count() > 1 {
+        return p.to_path_buf();
+    }
+    if let Some(dir) = std::env::current_exe()
+        .ok()
+        .and_then(|e| e.parent().map(Path::to_path_buf))
+    {
+        let candidate = dir.join(binary);
+        if candidate.exists() {
+            return candidate;
+        }
+        // Test binaries live in target/*/deps; stage binaries one level up.
+        if let Some(up) = dir.parent() {
+            let candidate = up.join(binary);
+            if candidate.exists() {
+                return candidate;
+            }
+        }
+    }
+    p.to_path_buf()
+}
+
+impl StageProcess {
+    pub fn new(spec: StageSpec, log_dir: &Path) -> Self {
+        let log_path = log_dir.join(format!("{}.log", spec.name));
+        Self {
+            spec,
+            state: StageState::Starting,
+            restarts: 0,
+            processed: 0,
+            last_seq: None,
+            child: None,
+            pid: None,
+            started_at: Instant::now(),
+            restart_at: None,
+            log_path,
+        }
+    }
+
+    pub fn pid(&self) -> Option<u32> {
+        self.pid
+    }
+
+    pub fn log_path(&self) -> &Path {
+        &self.log_path
+    }
+
+    pub fn started_at(&self) -> Instant {
+        self.started_at
+    }
+
+    /// Starts the process with `extra` arguments after the deploy file's own.
+    pub fn spawn(&mut self, extra: &[String]) -> anyhow::Result<()> {
+        let binary = resolve_binary(&self.spec.binary);
+        let log = std::fs::OpenOptions::new()
+            .create(true)
+            .append(true)
+            .open(&self.log_path)
+            .map_err(|e| {
+                anyhow::anyhow!(
+                    "stage {}: log file {}: {e}",
+                    self.spec.name,
+                    self.log_path.display()
+                )
+            })?;
+        let log_err = log.try_clone()?;
+        let mut cmd = Command::new(&binary);
+        cmd.args(&self.spec.args)
+            .args(extra)
+            .stdin(Stdio::null())
+            .stdout(log)
+            .stderr(log_err)
+            // Own process group: Ctrl-C reaches the supervisor, which stops stages in order.
+            .process_group(0);
+        let cpus = self.spec.cpus.clone();
+        let nice = self.spec.nice;
+        // SAFETY: only async-signal-safe libc calls between fork and exec.
+        unsafe {
+            cmd.pre_exec(move || {
+                // Die with the supervisor, whatever kills it.
+                libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGTERM);
+                if nice != 0 {
+                    libc::setpriority(libc::PRIO_PROCESS, 0, nice);
+                }
+                if !cpus.is_empty() {
+                    let mut set: libc::cpu_set_t = std::mem::zeroed();
+                    for &c in &cpus {
+                        libc::CPU_SET(c, &mut set);
+                    }
+                    // Ignore failure (cpus absent on this machine): run unpinned.
+                    libc::sched_setaffinity(0, std::mem::size_of::<libc::cpu_set_t>(), &set);
+                }
+                Ok(())
+            });
+        }
+        let child = cmd.spawn().map_err(|e| {
+            anyhow::anyhow!(
+                "stage {}: cannot start {}: {e}",
+                self.spec.name,
+                binary.display()
+            )
+        })?;
+        self.pid = Some(child.id());
+        self.child = Some(child);
+        self.state = StageState::Starting;
+        self.started_at = Instant::now();
+        self.restart_at = None;
+        Ok(())
+    }
+
+    /// Exit status if the process has ended since the last call.
+    pub fn poll_exit(&mut self) -> Option<ExitStatus> {
+        let child = self.child.as_mut()?;
+        match child.try_wait() {
+            Ok(Some(status)) => {
+                self.child = None;
+                Some(status)
+            }
+            Ok(None) => None,
+            Err(e) => {
+                tracing::warn!("stage {}: wait failed: {e}", self.spec.name);
+                None
+            }
+        }
+    }
+
+    pub fn is_running(&self) -> bool {
+        self.child.is_some()
+    }
+
+    /// Schedules a restart after exponential back-off; false when the limit is reached.
+    pub fn schedule_restart(&mut self) -> bool {
+        if self.restarts >= self.spec.restart_limit {
+            self.state = StageState::Failed;
+            return false;
+        }
+        let backoff = Duration::from_millis(200 * (1 << self.restarts.min(5)));
+        self.restarts += 1;
+        self.state = StageState::Restarting;
+        self.restart_at = Some(Instant::now() + backoff);
+        true
+    }
+
+    pub fn restart_due(&self) -> bool {
+        self.state == StageState::Restarting && self.restart_at.is_some_and(|t| Instant::now() >= t)
+    }
+
+    /// SIGTERM, then SIGKILL after `grace`; waits for the process to end.
+    pub fn stop(&mut self, grace: Duration) {
+        let Some(mut child) = self.child.take() else {
+            return;
+        };
+        // SAFETY: signalling our own child by pid.
+        unsafe { libc::kill(child.id() as i32, libc::SIGTERM) };
+        let deadline = Instant::now() + grace;
+        loop {
+            match child.try_wait() {
+                Ok(Some(_)) => break,
+                Ok(None) if Instant::now() < deadline => {
+                    std::thread::sleep(Duration::from_millis(10))
+                }
+                _ => {
+                    tracing::warn!(
+                        "stage {} did not stop in {grace:?}; killing it",
+                        self.spec.name
+                    );
+                    let _ = child.kill();
+                    let _ = child.wait();
+                    break;
+                }
+            }
+        }
+        if self.state != StageState::Finished {
+            self.state = StageState::Stopped;
+        }
+    }
+
+    /// Last lines of the stage's log, for error messages.
+    pub fn log_tail(&self, lines: usize) -> String {
+        let text = std::fs::read_to_string(&self.log_path).unwrap_or_default();
+        let all: Vec<&str> = text.lines().collect();
+        all[all.len().saturating_sub(lines)..].join("\n")
+    }
+}
+
+impl Drop for StageProcess {
+    fn drop(&mut self) {
+        // Never leave a stage behind, whatever path the supervisor leaves by.
+        if let Some(mut c) = self.child.take() {
+            let _ = c.kill();
+            let _ = c.wait();
+        }
+    }
+}

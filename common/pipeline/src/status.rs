@@ -1,0 +1,46 @@
+//! The status a running supervisor reports to `opengs ctl status`.
+
+use serde::{Deserialize, Serialize};
+
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+pub struct StageStatus {
+    pub name: String,
+    pub pid: Option<u32>,
+    pub state: String,
+    pub restarts: u32,
+    pub processed: u64,
+    pub last_seq: Option<u64>,
+}
+
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+pub struct PipelineStatus {
+    pub run_id: String,
+    pub out_dir: String,
+    pub elapsed_s: f64,
+    pub stages: Vec<StageStatus>,
+}
+
+impl PipelineStatus {
+    pub fn table(&self) -> String {
+        let mut s = format!(
+            "run {}  ({:.1} s)  {}\n",
+            self.run_id, self.elapsed_s, self.out_dir
+        );
+        s.push_str(&format!(
+            "{:<12} {:>8} {:<11} {:>8} {:>10} {:>9}\n",
+            "stage", "pid", "state", "restarts", "processed", "last seq"
+        ));
+        for st in &self.stages {
+            s.push_str(&format!(
+                "{:<12} {:>8} {:<11} {:>8} {:>10} {:>9}\n",
+                st.name,
+                st.pid.map_or("-".into(), |p| p.to_string()),
+                st.state,
+                st.restarts,
+                st.processed,
+                st.last_seq.map_or("-".into(), |p| p.to_string())
+            ));
+        }
+        s
+    }
+}

@@ -1,0 +1,624 @@
+//! `opengs run`: start the stages of a deploy file as processes, wait for each
+//! to be ready, restart the ones that die, collect telemetry and poses, and on
+//! end of data or Ctrl-C stop everything in order and write the run outputs.
+
+use std::collections::BTreeMap;
+use std::io::IsTerminal;
+use std::path::PathBuf;
+use std::time::{Duration, Instant};
+
+use opengs_ipc_schema::service::{CONTROL_REPLIES, CONTROL_REQUESTS, POSES, TELEMETRY};
+use opengs_ipc_schema::{
+    ControlCommand, ControlHeader, PoseHeader, TelemetryEvent, TelemetryHeader,
+};
+use opengs_runtime::{
+    waitset, ActiveRun, ActiveRuns, CallbackProgression, Inlet, Outlet, RunContext,
+    WaitSetRunResult,
+};
+use opengs_telemetry::{ChromeTrace, LatencyProfile, LatencyReport, StageSample};
+
+use crate::deploy::{DeployFile, StageRole};
+use crate::recorder::Recorder;
+use crate::stage_process::{StageProcess, StageState};
+use crate::status::{PipelineStatus, StageStatus};
+use crate::DatasetArgs;
+
+/// Everything `opengs run` decides before the stages start.
+pub struct RunOptions {
+    pub deploy: DeployFile,
+    pub dataset: DatasetArgs,
+    pub out_dir: PathBuf,
+    pub run_id: String,
+    /// Sensor pacing (`None` = dataset rate, 0 = as fast as possible).
+    pub max_rate: Option<f64>,
+    /// Extra arguments per stage name (e.g. the tracker's `--gt-first-pose`).
+    pub stage_args: BTreeMap<String, Vec<String>>,
+    /// Show a progress bar / periodic progress lines.
+    pub progress: bool,
+}
+
+/// What a finished run produced.
+pub struct RunSummary {
+    pub out_dir: PathBuf,
+    pub frames_published: u64,
+    pub poses: usize,
+    pub keyframes: usize,
+    pub tracking_failures: usize,
+    pub elapsed_s: f64,
+    pub latency: LatencyReport,
+    pub restarts: BTreeMap<String, u32>,
+    pub interrupted: bool,
+    /// Files of this run still in /dev/shm or the iceoryx2 root after shutdown (should be none).
+    pub leftover_files: Vec<PathBuf>,
+    pub recorder: Recorder,
+}
+
+/// Why the main loop ended.
+#[derive(Debug, PartialEq)]
+enum Ending {
+    EndOfData,
+    Interrupted,
+    StopRequested,
+    StageFailed(String),
+}
+
+pub struct Supervisor;
+
+struct Channels {
+    telemetry: Inlet<TelemetryHeader>,
+    poses: Inlet<PoseHeader>,
+    control: Inlet<ControlHeader>,
+    replies: Outlet<ControlHeader>,
+}
+
+impl Supervisor {
+    pub fn run(opts: RunOptions) -> anyhow::Result<RunSummary> {
+        std::fs::create_dir_all(opts.out_dir.join("logs")).map_err(|e| {
+            anyhow::anyhow!(
+                "cannot create run directory {}: {e}",
+                opts.out_dir.display()
+            )
+        })?;
+        let ctx = RunContext::new(&opts.run_id)?;
+        ctx.cleanup_dead_nodes();
+        let registry = ActiveRuns::default();
+        registry.register(&ActiveRun {
+            run_id: opts.run_id.clone(),
+            pid: std::process::id(),
+            out_dir: opts.out_dir.clone(),
+        })?;
+        let started = Instant::now();
+        let mut state = RunState::new(&opts);
+        // IPC objects live in this scope so they are gone before the leftover check.
+        let ending = {
+            let node = ctx.node("supervisor")?;
+            let ch = Channels {
+                telemetry: Inlet::new(&ctx, &node, &TELEMETRY)?,
+                poses: Inlet::new(&ctx, &node, &POSES)?,
+                control: Inlet::new(&ctx, &node, &CONTROL_REQUESTS)?,
+                replies: Outlet::new(&ctx, &node, &CONTROL_REPLIES, 4096)?,
+            };
+            let result = state
+                .start_all(&ctx, &ch)
+                .and_then(|()| state.main_loop(&ctx, &ch, started));
+            // Stop in order whatever happened: the source first, so consumers see the end.
+            state.stop_all();
+            // Collect what the stages sent before they exited.
+            state.drain(&ch);
+            result
+        };
+        registry.unregister(&opts.run_id);
+        ctx.cleanup_dead_nodes();
+        ctx.remove_domain_segment();
+        let leftover_files = ctx.leftover_files();
+        if !leftover_files.is_empty() {
+            tracing::warn!(
+                "{} shared-memory files of this run remain: {:?}",
+                leftover_files.len(),
+                leftover_files
+            );
+        }
+        // Outputs are written on every path: nothing produced is lost.
+        state.write_outputs(&opts.out_dir)?;
+        let latency = state.profile.report();
+        let summary = RunSummary {
+            out_dir: opts.out_dir.clone(),
+            frames_published: state.stage_processed("sensor"),
+            poses: state.recorder.len(),
+            keyframes: state.recorder.keyframes(),
+            tracking_failures: state.recorder.failures(),
+            elapsed_s: started.elapsed().as_secs_f64(),
+            latency,
+            restarts: state
+                .stages
+                .iter()
+                .map(|s| (s.spec.name.clone(), s.restarts))
+                .collect(),
+            interrupted: matches!(ending, Ok(Ending::Interrupted)),
+            leftover_files,
+            recorder: std::mem::take(&mut state.recorder),
+        };
+        match ending? {
+            Ending::StageFailed(why) => Err(anyhow::anyhow!(
+                "{why}; outputs so far are in {}",
+                opts.out_dir.display()
+            )),
+            _ => Ok(summary),
+        }
+    }
+}
+
+struct RunState {
+    run_id: String,
+    out_dir: PathBuf,
+    stages: Vec<StageProcess>,
+    stage_args: BTreeMap<String, Vec<String>>,
+    source_args: Vec<String>,
+    deploy: DeployFile,
+    profile: LatencyProfile,
+    trace: ChromeTrace,
+    recorder: Recorder,
+    end_of_data: Option<(u64, Instant)>,
+    total_frames: Option<usize>,
+    progress: Option<Progress>,
+}
+
+impl RunState {
+    fn new(opts: &RunOptions) -> Self {
+        let log_dir = opts.out_dir.join("logs");
+        let mut source_args = opts.dataset.to_args();
+        if let Some(r) = opts.max_rate {
+            source_args.extend(["--max-rate".into(), r.to_string()]);
+        }
+        let total_frames = opts
+            .dataset
+            .spec()
+            .ok()
+            .and_then(|s| opengs_datasets::open_dataset(&s).ok())
+            .map(|d| d.len());
+        Self {
+            run_id: opts.run_id.clone(),
+            out_dir: opts.out_dir.clone(),
+            stages: opts
+                .deploy
+                .stages
+                .iter()
+                .map(|s| StageProcess::new(s.clone(), &log_dir))
+                .collect(),
+            stage_args: opts.stage_args.clone(),
+            source_args,
+            deploy: opts.deploy.clone(),
+            profile: LatencyProfile::new(opts.deploy.terminal_stage.as_deref()),
+            trace: ChromeTrace::default(),
+            recorder: Recorder::default(),
+            end_of_data: None,
+            total_frames,
+            progress: opts.progress.then(|| Progress::new(total_frames)),
+        }
+    }
+
+    fn args_for(&self, i: usize) -> Vec<String> {
+        let s = &self.stages[i];
+        let mut a = vec![
+            "--run-id".to_string(),
+            self.run_id.clone(),
+            "--out".to_string(),
+            self.out_dir.display().to_string(),
+        ];
+        if s.spec.role == StageRole::Source {
+            a.extend(self.source_args.iter().cloned());
+            // A restarted source resumes after the last frame it published.
+            if let Some(seq) = s.last_seq {
+                a.extend(["--start-frame".to_string(), (seq + 1).to_string()]);
+            }
+        }
+        if let Some(extra) = self.stage_args.get(&s.spec.name) {
+            a.extend(extra.iter().cloned());
+        }
+        a
+    }
+
+    fn stage_index(&self, name: &str) -> Option<usize> {
+        self.stages.iter().position(|s| s.spec.name == name)
+    }
+
+    fn stage_processed(&self, name: &str) -> u64 {
+        self.stage_index(name)
+            .map_or(0, |i| self.stages[i].processed)
+    }
+
+    /// Starts each stage in deploy order and waits until it reports ready.
+    fn start_all(&mut self, ctx: &RunContext, ch: &Channels) -> anyhow::Result<()> {
+        let ws = waitset()?;
+        let _t = ws
+            .attach_notification(ch.telemetry.listener())
+            .map_err(|e| anyhow::anyhow!("{e:?}"))?;
+        let _tick = ws
+            .attach_interval(Duration::from_millis(100))
+            .map_err(|e| anyhow::anyhow!("{e:?}"))?;
+        for i in 0..self.stages.len() {
+            let args = self.args_for(i);
+            self.stages[i].spawn(&args)?;
+            self.note(&format!(
+                "starting {} (pid {})",
+                self.stages[i].spec.name,
+                self.stages[i].pid().unwrap_or(0)
+            ));
+            let deadline = Instant::now() + Duration::from_secs_f64(self.deploy.startup_timeout_s);
+            while self.stages[i].state != StageState::Ready {
+                match ws.wait_and_process_once(|_| CallbackProgression::Continue) {
+                    Ok(WaitSetRunResult::TerminationRequest | WaitSetRunResult::Interrupt) => {
+                        anyhow::bail!("interrupted while starting {}", self.stages[i].spec.name)
+                    }
+                    Err(e) => anyhow::bail!("WaitSet: {e:?}"),
+                    Ok(_) => {}
+                }
+                self.handle_telemetry(ch);
+                if let Some(status) = self.stages[i].poll_exit() {
+                    anyhow::bail!(
+                        "stage {} exited during start-up ({status}); its log {} ends with:\n{}",
+                        self.stages[i].spec.name,
+                        self.stages[i].log_path().display(),
+                        self.stages[i].log_tail(15)
+                    );
+                }
+                if Instant::now() > deadline {
+                    anyhow::bail!(
+                        "stage {} did not report ready within {} s; see {}",
+                        self.stages[i].spec.name,
+                        self.deploy.startup_timeout_s,
+                        self.stages[i].log_path().display()
+                    );
+                }
+            }
+        }
+        let _ = ctx;
+        Ok(())
+    }
+
+    fn main_loop(
+        &mut self,
+        ctx: &RunContext,
+        ch: &Channels,
+        started: Instant,
+    ) -> anyhow::Result<Ending> {
+        let ws = waitset()?;
+        let err = |e| anyhow::anyhow!("WaitSet attach: {e:?}");
+        let _g1 = ws
+            .attach_notification(ch.telemetry.listener())
+            .map_err(err)?;
+        let _g2 = ws.attach_notification(ch.poses.listener()).map_err(err)?;
+        let _g3 = ws.attach_notification(ch.control.listener()).map_err(err)?;
+        let _tick = ws
+            .attach_interval(Duration::from_millis(100))
+            .map_err(err)?;
+        loop {
+            match ws.wait_and_process_once(|_| CallbackProgression::Continue) {
+                Ok(WaitSetRunResult::TerminationRequest | WaitSetRunResult::Interrupt) => {
+                    self.note("interrupted: stopping stages and saving outputs");
+                    return Ok(Ending::Interrupted);
+                }
+                Err(e) => anyhow::bail!("WaitSet: {e:?}"),
+                Ok(_) => {}
+            }
+            self.handle_telemetry(ch);
+            self.handle_poses(ch);
+            if self.handle_control(ch, started) {
+                return Ok(Ending::StopRequested);
+            }
+            if let Some(failed) = self.watch_children(ctx)? {
+                return Ok(Ending::StageFailed(failed));
+            }
+            if let Some(p) = &mut self.progress {
+                p.update(&self.stages, self.recorder.len(), started);
+            }
+            if let Some((last_seq, at)) = self.end_of_data {
+                let terminal_done = match &self.deploy.terminal_stage {
+                    Some(t) => self
+                        .stage_index(t)
+                        .and_then(|i| self.stages[i].last_seq)
+                        .is_some_and(|s| s >= last_seq),
+                    None => true,
+                };
+                if terminal_done || at.elapsed().as_secs_f64() > self.deploy.drain_timeout_s {
+                    if !terminal_done {
+                        self.note("drain timeout: stopping stages with work still queued");
+                    }
+                    return Ok(Ending::EndOfData);
+                }
+            }
+        }
+    }
+
+    fn handle_telemetry(&mut self, ch: &Channels) {
+        ch.telemetry.clear_wakeups();
+        loop {
+            let sample = match ch.telemetry.receive() {
+                Ok(Some(s)) => s,
+                Ok(None) => break,
+                Err(e) => {
+                    tracing::warn!("{e}");
+                    break;
+                }
+            };
+            let h = *sample.user_header();
+            let event = match h.decode(sample.payload()) {
+                Ok(ev) => ev,
+                Err(e) => {
+                    tracing::error!("malformed telemetry dropped: {e}");
+                    continue;
+                }
+            };
+            let name = h.stage_name().to_string();
+            let Some(i) = self.stage_index(&name) else {
+                continue;
+            };
+            let stage = &mut self.stages[i];
+            match event {
+                TelemetryEvent::Ready => {
+                    if stage.state != StageState::Ready {
+                        stage.state = StageState::Ready;
+                    }
+                }
+                TelemetryEvent::Processed => {
+                    stage.processed += 1;
+                    stage.last_seq =
+                        Some(stage.last_seq.map_or(h.stamp.seq, |s| s.max(h.stamp.seq)));
+                    let s = StageSample {
+                        seq: h.stamp.seq,
+                        origin_ns: h.stamp.origin_ns,
+                        input_sent_ns: h.input_sent_ns,
+                        start_ns: h.start_ns,
+                        end_ns: h.end_ns,
+                    };
+                    self.profile.record(&name, &s);
+                    self.trace.record(&name, h.pid, &s);
+                }
+                TelemetryEvent::Dropped => self.profile.record_drop(&name),
+                TelemetryEvent::Finished => {
+                    if stage.spec.role == StageRole::Source && self.end_of_data.is_none() {
+                        self.end_of_data = Some((h.stamp.seq, Instant::now()));
+                    }
+                }
+            }
+        }
+    }
+
+    fn handle_poses(&mut self, ch: &Channels) {
+        ch.poses.clear_wakeups();
+        loop {
+            match ch.poses.receive() {
+                Ok(Some(s)) => match s.user_header().decode(s.payload()) {
+                    Ok(status) => self.recorder.record(s.user_header(), status),
+                    Err(e) => tracing::error!("malformed pose dropped: {e}"),
+                },
+                Ok(None) => break,
+                Err(e) => {
+                    tracing::warn!("{e}");
+                    break;
+                }
+            }
+        }
+    }
+
+    /// Answers control requests; true when a stop was requested.
+    fn handle_control(&mut self, ch: &Channels, started: Instant) -> bool {
+        ch.control.clear_wakeups();
+        let mut stop = false;
+        while let Ok(Some(s)) = ch.control.receive() {
+            let view = match s.user_header().decode(s.payload()) {
+                Ok(v) => v,
+                Err(e) => {
+                    tracing::error!("malformed control request dropped: {e}");
+                    continue;
+                }
+            };
+            let (ok, text) = match view.command {
+                ControlCommand::Status => (
+                    true,
+                    serde_json::to_string(&self.status(started)).unwrap_or_default(),
+                ),
+                ControlCommand::Stop => {
+                    stop = true;
+                    (true, "\"stopping\"".to_string())
+                }
+                ControlCommand::Swap => (
+                    false,
+                    format!(
+                        "\"swap '{}': no stage of this pipeline has swappable kinds\"",
+                        view.text
+                    ),
+                ),
+                ControlCommand::Reply => continue,
+            };
+            let reply = ControlHeader::new(ControlCommand::Reply, view.request_id, ok, &text);
+            if let Err(e) = ch.replies.send(reply, |h, buf| h.encode(&text, buf)) {
+                tracing::warn!("control reply: {e}");
+            }
+        }
+        stop
+    }
+
+    fn status(&self, started: Instant) -> PipelineStatus {
+        PipelineStatus {
+            run_id: self.run_id.clone(),
+            out_dir: self.out_dir.display().to_string(),
+            elapsed_s: started.elapsed().as_secs_f64(),
+            stages: self
+                .stages
+                .iter()
+                .map(|s| StageStatus {
+                    name: s.spec.name.clone(),
+                    pid: s.is_running().then(|| s.pid()).flatten(),
+                    state: serde_json::to_value(s.state)
+                        .ok()
+                        .and_then(|v| v.as_str().map(String::from))
+                        .unwrap_or_default(),
+                    restarts: s.restarts,
+                    processed: s.processed,
+                    last_seq: s.last_seq,
+                })
+                .collect(),
+        }
+    }
+
+    /// Reaps exited stages, restarts them with back-off; `Some(reason)` when one is out of restarts.
+    fn watch_children(&mut self, ctx: &RunContext) -> anyhow::Result<Option<String>> {
+        for i in 0..self.stages.len() {
+            if let Some(status) = self.stages[i].poll_exit() {
+                let name = self.stages[i].spec.name.clone();
+                let clean = status.success();
+                if clean && self.stages[i].spec.role == StageRole::Source {
+                    self.stages[i].state = StageState::Finished;
+                    if self.end_of_data.is_none() {
+                        // Finished without its telemetry arriving: the last seq it processed stands.
+                        let last = self.stages[i].last_seq.unwrap_or(0);
+                        self.end_of_data = Some((last, Instant::now()));
+                    }
+                    continue;
+                }
+                self.note(&format!(
+                    "stage {name} exited ({status}); log: {}",
+                    self.stages[i].log_path().display()
+                ));
+                // Its shared-memory resources must go before a replacement opens them.
+                ctx.cleanup_dead_nodes();
+                if !self.stages[i].schedule_restart() {
+                    return Ok(Some(format!(
+                        "stage {name} died {} times (limit {}); last log lines:\n{}",
+                        self.stages[i].restarts + 1,
+                        self.stages[i].spec.restart_limit,
+                        self.stages[i].log_tail(15)
+                    )));
+                }
+            }
+            if self.stages[i].restart_due() {
+                let args = self.args_for(i);
+                self.stages[i].spawn(&args)?;
+                self.note(&format!(
+                    "restarted {} (pid {}, restart {}/{})",
+                    self.stages[i].spec.name,
+                    self.stages[i].pid().unwrap_or(0),
+                    self.stages[i].restarts,
+                    self.stages[i].spec.restart_limit
+                ));
+            }
+        }
+        Ok(None)
+    }
+
+    /// Stops every running stage, the source first.
+    fn stop_all(&mut self) {
+        let order: Vec<usize> = (0..self.stages.len()).rev().collect();
+        for i in order {
+            if self.stages[i].is_running() {
+                self.stages[i].stop(Duration::from_secs(5));
+            }
+        }
+        if let Some(p) = &self.progress {
+            p.finish();
+        }
+    }
+
+    fn drain(&mut self, ch: &Channels) {
+        self.handle_telemetry(ch);
+        self.handle_poses(ch);
+    }
+
+    fn write_outputs(&self, dir: &std::path::Path) -> anyhow::Result<()> {
+        if !self.recorder.is_empty() {
+            self.recorder.write(dir)?;
+        }
+        self.profile.report().write(&dir.join("latency.json"))?;
+        self.trace.write(&dir.join("trace.json"))?;
+        let status = serde_json::json!({
+            "run_id": self.run_id,
+            "frames_total": self.total_frames,
+            "stages": self.stages.iter().map(|s| serde_json::json!({
+                "name": s.spec.name, "restarts": s.restarts, "processed": s.processed, "last_seq": s.last_seq,
+            })).collect::<Vec<_>>(),
+        });
+        std::fs::write(dir.join("run.json"), serde_json::to_string_pretty(&status)?)?;
+        Ok(())
+    }
+
+    fn note(&self, msg: &str) {
+        // Lifecycle events (starts, deaths, restarts) are always shown, even with --quiet.
+        match &self.progress {
+            Some(p) => p.println(msg),
+            None => eprintln!("{msg}"),
+        }
+    }
+}
+
+/// Progress display: a bar on a terminal, a line every few seconds otherwise.
+struct Progress {
+    bar: Option<indicatif::ProgressBar>,
+    last_line: Instant,
+}
+
+impl Progress {
+    fn new(total: Option<usize>) -> Self {
+        let bar = std::io::stderr().is_terminal().then(|| {
+            let b = indicatif::ProgressBar::new(total.unwrap_or(0) as u64);
+            let style = indicatif::ProgressStyle::with_template(
+                "{spinner} [{elapsed_precise}] {bar:30} {pos}/{len} frames  {msg}",
+            )
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar());
+            b.set_style(style);
+            b
+        });
+        Self {
+            bar,
+            last_line: Instant::now(),
+        }
+    }
+
+    fn update(&mut self, stages: &[StageProcess], poses: usize, started: Instant) {
+        let secs = started.elapsed().as_secs_f64().max(1e-3);
+        let per_stage: Vec<String> = stages
+            .iter()
+            .map(|s| {
+                let restarts = if s.restarts > 0 {
+                    format!(" r{}", s.restarts)
+                } else {
+                    String::new()
+                };
+                format!(
+                    "{} {:.1}/s{restarts}",
+                    s.spec.name,
+                    s.processed as f64 / secs
+                )
+            })
+            .collect();
+        let msg = per_stage.join("  ");
+        let done = stages
+            .iter()
+            .find(|s| s.spec.role == StageRole::Source)
+            .map_or(poses as u64, |s| s.processed);
+        match &self.bar {
+            Some(b) => {
+                b.set_position(done);
+                b.set_message(msg);
+            }
+            None if self.last_line.elapsed() > Duration::from_secs(5) => {
+                self.last_line = Instant::now();
+                eprintln!("[{secs:6.1} s] {done} frames  {msg}");
+            }
+            None => {}
+        }
+    }
+
+    fn println(&self, msg: &str) {
+        match &self.bar {
+            Some(b) => b.println(msg),
+            None => eprintln!("{msg}"),
+        }
+    }
+
+    fn finish(&self) {
+        if let Some(b) = &self.bar {
+            b.finish_and_clear();
+        }
+    }
+}

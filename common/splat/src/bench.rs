@@ -1,0 +1,225 @@
+//! Render benchmark: deterministic indoor scenes, median ms per frame with and without the
+//! semantic outputs (labels + top-K + visible counts).
+
+use std::fmt;
+use std::time::Instant;
+
+use opengs_geometry::Intrinsics;
+
+use crate::camera::Camera;
+use crate::map::GaussianMap;
+use crate::output::{RenderRequest, DEFAULT_TOP_K};
+use crate::render::{render, render_into};
+use crate::scene::{indoor_poses, indoor_scene};
+
+#[derive(Debug, Clone)]
+pub struct BenchConfig {
+    pub gaussian_counts: Vec<usize>,
+    pub intrinsics: Vec<Intrinsics>,
+    /// Timed frames per case (after one warm-up frame); each uses the next pose of an arc.
+    pub frames: usize,
+    pub top_k: usize,
+}
+
+/// Pinhole camera for a benchmark image size, principal point at the image centre:
+/// Replica's focal (600) at 1200×680, else TUM's (525 at 640 wide) scaled with the width.
+pub fn intrinsics_for_size(width: u32, height: u32) -> Intrinsics {
+    let f = match (width, height) {
+        (1200, 680) => 600.0,
+        _ => 525.0 * width as f64 / 640.0,
+    };
+    let (cx, cy) = ((width as f64 - 1.0) / 2.0, (height as f64 - 1.0) / 2.0);
+    Intrinsics::new(f, f, cx, cy, width, height)
+}
+
+impl Default for BenchConfig {
+    fn default() -> Self {
+        Self {
+            gaussian_counts: vec![100_000, 500_000],
+            intrinsics: vec![
+                intrinsics_for_size(640, 480),
+                intrinsics_for_size(1200, 680),
+            ],
+            frames: 9,
+            top_k: DEFAULT_TOP_K,
+        }
+    }
+}
+
+#[derive(Debug, Clone)]
+pub struct BenchRow {
+    pub gaussians: usize,
+    pub width: u32,
+    pub height: u32,
+    /// Median ms per frame, colour + depth (+ silhouette) only.
+    pub ms_color_depth: f64,
+    /// Median ms per frame, colour + depth + labels + top-K + visible counts.
+    pub ms_semantic: f64,
+    /// Median CPU ms per frame summed over all threads (a): robust to a shared machine.
+    pub cpu_ms_color_depth: f64,
+    /// Median CPU ms per frame summed over all threads (b).
+    pub cpu_ms_semantic: f64,
+    /// Mean top-K entries stored per pixel.
+    pub topk_per_pixel: f64,
+}
+
+impl BenchRow {
+    pub fn overhead(&self) -> f64 {
+        self.ms_semantic / self.ms_color_depth - 1.0
+    }
+}
+
+#[derive(Debug, Clone)]
+pub struct BenchReport {
+    pub rows: Vec<BenchRow>,
+    pub bytes_per_gaussian: usize,
+    pub threads: usize,
+}
+
+impl fmt::Display for BenchReport {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        writeln!(
+            f,
+            "render benchmark ({} threads, {} bytes/Gaussian, medians)",
+            self.threads, self.bytes_per_gaussian
+        )?;
+        writeln!(
+            f,
+            "{:>9} {:>10} {:>12} {:>8} {:>14} {:>8} {:>9} {:>11} {:>11} {:>8}",
+            "gaussians",
+            "size",
+            "col+dep ms",
+            "fps",
+            "+lab+topK ms",
+            "fps",
+            "overhead",
+            "cpu ms (a)",
+            "cpu ms (b)",
+            "topK/px"
+        )?;
+        for r in &self.rows {
+            writeln!(
+                f,
+                "{:>9} {:>10} {:>12.2} {:>8.1} {:>14.2} {:>8.1} {:>8.1}% {:>11.2} {:>11.2} {:>8.1}",
+                r.gaussians,
+                format!("{}x{}", r.width, r.height),
+                r.ms_color_depth,
+                1000.0 / r.ms_color_depth,
+                r.ms_semantic,
+                1000.0 / r.ms_semantic,
+                100.0 * r.overhead(),
+                r.cpu_ms_color_depth,
+                r.cpu_ms_semantic,
+                r.topk_per_pixel
+            )?;
+        }
+        Ok(())
+    }
+}
+
+/// CPU time of the whole process (all threads), in ms: robust to other processes on a busy box.
+pub fn process_cpu_ms() -> f64 {
+    let mut ts = libc::timespec {
+        tv_sec: 0,
+        tv_nsec: 0,
+    };
+    // SAFETY: clock_gettime only writes the timespec we pass.
+    let rc = unsafe { libc::clock_gettime(libc::CLOCK_PROCESS_CPUTIME_ID, &mut ts) };
+    if rc != 0 {
+        return f64::NAN;
+    }
+    ts.tv_sec as f64 * 1e3 + ts.tv_nsec as f64 * 1e-6
+}
+
+/// Wall and CPU ms of each forward stage for one frame, for profiling.
+/// `out` is reused across calls, as a SLAM loop would.
+pub fn stage_breakdown(
+    map: &GaussianMap,
+    cam: &Camera,
+    req: &RenderRequest,
+    out: &mut crate::RenderOutput,
+) -> String {
+    use crate::{bin_and_sort, project, rasterize_into, TileGrid};
+    let grid = TileGrid::new(cam.width(), cam.height());
+    let mut lines = String::new();
+    let mut t = (Instant::now(), process_cpu_ms());
+    let mut lap = |name: &str, lines: &mut String| {
+        let now = (Instant::now(), process_cpu_ms());
+        lines.push_str(&format!(
+            "{name:>10}: wall {:7.2} ms  cpu {:7.2} ms\n",
+            (now.0 - t.0).as_secs_f64() * 1e3,
+            now.1 - t.1
+        ));
+        t = (Instant::now(), process_cpu_ms());
+    };
+    let p = project(map, cam, &grid);
+    lap("project", &mut lines);
+    let b = bin_and_sort(&p, &grid);
+    lap("bin+sort", &mut lines);
+    rasterize_into(&p, &b, &grid, &map.labels, req, out);
+    lap("rasterize", &mut lines);
+    lines.push_str(&format!(
+        "visible {} of {}, tile pairs {}, top-K entries {}\n",
+        p.tile_rects.iter().filter(|r| !r.is_empty()).count(),
+        map.len(),
+        b.ids.len(),
+        out.top_k.as_ref().map_or(0, |t| t.entries())
+    ));
+    lines
+}
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
+/// (median wall ms, median CPU ms, top-K entries per pixel) over one frame per camera.
+fn time_frames(map: &GaussianMap, cams: &[Camera], req: &RenderRequest) -> (f64, f64, f64) {
+    // Buffers reused across frames, as a SLAM loop would.
+    let mut r = render(map, &cams[0], req);
+    let mut wall = Vec::with_capacity(cams.len());
+    let mut cpu = Vec::with_capacity(cams.len());
+    let mut topk = 0.0;
+    for cam in cams {
+        let (t0, c0) = (Instant::now(), process_cpu_ms());
+        render_into(map, cam, req, &mut r);
+        wall.push(t0.elapsed().as_secs_f64() * 1e3);
+        cpu.push(process_cpu_ms() - c0);
+        if let Some(tk) = &r.output.top_k {
+            topk = tk.entries() as f64 / tk.count.len() as f64;
+        }
+    }
+    (median(wall), median(cpu), topk)
+}
+
+/// Runs every (scene size × resolution) case and returns the table.
+pub fn run_render_bench(cfg: &BenchConfig) -> BenchReport {
+    let poses = indoor_poses(cfg.frames.max(1));
+    let mut rows = Vec::new();
+    for &n in &cfg.gaussian_counts {
+        let map = indoor_scene(n, 7);
+        for k in &cfg.intrinsics {
+            let cams: Vec<Camera> = poses
+                .iter()
+                .map(|p| Camera::from_pose(*k, p, 0.05))
+                .collect();
+            let (a, a_cpu, _) = time_frames(&map, &cams, &RenderRequest::color_depth());
+            let (b, b_cpu, topk) = time_frames(&map, &cams, &RenderRequest::semantic(cfg.top_k));
+            rows.push(BenchRow {
+                gaussians: n,
+                width: k.width,
+                height: k.height,
+                ms_color_depth: a,
+                ms_semantic: b,
+                cpu_ms_color_depth: a_cpu,
+                cpu_ms_semantic: b_cpu,
+                topk_per_pixel: topk,
+            });
+        }
+    }
+    BenchReport {
+        rows,
+        bytes_per_gaussian: GaussianMap::bytes_per_gaussian(),
+        threads: rayon::current_num_threads(),
+    }
+}

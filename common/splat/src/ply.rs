@@ -1,0 +1,561 @@
+//! Standard 3DGS PLY (x y z nx ny nz f_dc_* f_rest_* opacity scale_* rot_*) plus `label`.
+//!
+//! Hand-written: the layout is a flat vertex table, and ply-rs (unmaintained) reports
+//! errors without saying which element/property/line is wrong.
+
+use std::io::Write;
+use std::path::Path;
+
+use crate::map::{Gaussian, GaussianMap};
+
+#[derive(Debug, thiserror::Error)]
+pub enum PlyError {
+    #[error("cannot access {path}")]
+    Io {
+        path: String,
+        source: std::io::Error,
+    },
+    #[error("PLY header line {line}: {msg}")]
+    Header { line: usize, msg: String },
+    #[error("PLY has no 'vertex' element")]
+    NoVertexElement,
+    #[error("PLY vertex element lacks required property '{0}'")]
+    MissingProperty(String),
+    #[error(
+        "PLY data truncated: file ends inside vertex {vertex} of {count} (property '{property}')"
+    )]
+    Truncated {
+        vertex: usize,
+        count: usize,
+        property: String,
+    },
+    #[error("PLY line {line}: {msg}")]
+    Ascii { line: usize, msg: String },
+    #[error("PLY vertex {vertex}: {msg}")]
+    Invalid { vertex: usize, msg: String },
+    #[error("PLY: {0}")]
+    Unsupported(String),
+}
+
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Scalar {
+    I8,
+    U8,
+    I16,
+    U16,
+    I32,
+    U32,
+    F32,
+    F64,
+}
+
+impl Scalar {
+    fn parse(s: &str) -> Option<Self> {
+        Some(match s {
+            "char" | "int8" => Scalar::I8,
+            "uchar" | "uint8" => Scalar::U8,
+            "short" | "int16" => Scalar::I16,
+            "ushort" | "uint16" => Scalar::U16,
+            "int" | "int32" => Scalar::I32,
+            "uint" | "uint32" => Scalar::U32,
+            "float" | "float32" => Scalar::F32,
+            "double" | "float64" => Scalar::F64,
+            _ => return None,
+        })
+    }
+
+    fn size(self) -> usize {
+        match self {
+            Scalar::I8 | Scalar::U8 => 1,
+            Scalar::I16 | Scalar::U16 => 2,
+            Scalar::I32 | Scalar::U32 | Scalar::F32 => 4,
+            Scalar::F64 => 8,
+        }
+    }
+
+    fn read(self, b: &[u8], little: bool) -> f64 {
+        macro_rules! rd {
+            ($t:ty, $n:expr) => {{
+                let a: [u8; $n] = b[..$n].try_into().expect("slice length checked");
+                (if little {
+                    <$t>::from_le_bytes(a)
+                } else {
+                    <$t>::from_be_bytes(a)
+                }) as f64
+            }};
+        }
+        match self {
+            Scalar::I8 => b[0] as i8 as f64,
+            Scalar::U8 => b[0] as f64,
+            Scalar::I16 => rd!(i16, 2),
+            Scalar::U16 => rd!(u16, 2),
+            Scalar::I32 => rd!(i32, 4),
+            Scalar::U32 => rd!(u32, 4),
+            Scalar::F32 => rd!(f32, 4),
+            Scalar::F64 => rd!(f64, 8),
+        }
+    }
+}
+
+#[derive(Debug)]
+struct Property {
+    name: String,
+    /// `None` for list properties (only allowed in elements we skip in ASCII files).
+    kind: Option<Scalar>,
+}
+
+#[derive(Debug)]
+struct Element {
+    name: String,
+    count: usize,
+    props: Vec<Property>,
+}
+
+#[derive(Debug, PartialEq)]
+enum Format {
+    Ascii,
+    BinaryLe,
+    BinaryBe,
+}
+
+struct Header {
+    format: Format,
+    elements: Vec<Element>,
+    /// Byte offset of the body and the number of header lines.
+    body: usize,
+    lines: usize,
+}
+
+fn parse_header(data: &[u8]) -> Result<Header, PlyError> {
+    let mut pos = 0;
+    let mut line_no = 0;
+    let mut format = None;
+    let mut elements: Vec<Element> = Vec::new();
+    loop {
+        line_no += 1;
+        let err = |msg: String| PlyError::Header { line: line_no, msg };
+        let Some(nl) = data[pos..].iter().position(|&c| c == b'\n') else {
+            return Err(err("header ends before 'end_header'".into()));
+        };
+        let line = std::str::from_utf8(&data[pos..pos + nl])
+            .map_err(|_| err("header line is not text".into()))?
+            .trim_end_matches('\r');
+        pos += nl + 1;
+        let words: Vec<&str> = line.split_whitespace().collect();
+        if line_no == 1 {
+            if line != "ply" {
+                return Err(err(format!("expected 'ply' magic, found '{line}'")));
+            }
+            continue;
+        }
+        match words.first().copied() {
+            None | Some("comment") | Some("obj_info") => {}
+            Some("format") => {
+                format = Some(match words.get(1).copied() {
+                    Some("ascii") => Format::Ascii,
+                    Some("binary_little_endian") => Format::BinaryLe,
+                    Some("binary_big_endian") => Format::BinaryBe,
+                    other => return Err(err(format!("unknown format {other:?}"))),
+                });
+            }
+            Some("element") => {
+                let (Some(name), Some(count)) = (words.get(1), words.get(2)) else {
+                    return Err(err("expected 'element NAME COUNT'".into()));
+                };
+                let count = count
+                    .parse()
+                    .map_err(|_| err(format!("element '{name}': bad count '{count}'")))?;
+                elements.push(Element {
+                    name: name.to_string(),
+                    count,
+                    props: Vec::new(),
+                });
+            }
+            Some("property") => {
+                let Some(el) = elements.last_mut() else {
+                    return Err(err("property before any element".into()));
+                };
+                let prop = if words.get(1) == Some(&"list") {
+                    let Some(name) = words.get(4) else {
+                        return Err(err("expected 'property list T T NAME'".into()));
+                    };
+                    Property {
+                        name: name.to_string(),
+                        kind: None,
+                    }
+                } else {
+                    let (Some(ty), Some(name)) = (words.get(1), words.get(2)) else {
+                        return Err(err("expected 'property TYPE NAME'".into()));
+                    };
+                    let kind = Scalar::parse(ty)
+                        .ok_or_else(|| err(format!("property '{name}': unknown type '{ty}'")))?;
+                    Property {
+                        name: name.to_string(),
+                        kind: Some(kind),
+                    }
+                };
+                el.props.push(prop);
+            }
+            Some("end_header") => break,
+            Some(other) => return Err(err(format!("unknown header keyword '{other}'"))),
+        }
+    }
+    let format = format.ok_or(PlyError::Header {
+        line: line_no,
+        msg: "no 'format' line".into(),
+    })?;
+    Ok(Header {
+        format,
+        elements,
+        body: pos,
+        lines: line_no,
+    })
+}
+
+/// Column index of each Gaussian field in the vertex property list.
+struct Columns {
+    mean: [usize; 3],
+    dc: [usize; 3],
+    opacity: usize,
+    scale: [usize; 3],
+    rot: [usize; 4],
+    label: Option<usize>,
+}
+
+impl Columns {
+    fn find(el: &Element) -> Result<Self, PlyError> {
+        let idx = |name: &str| {
+            el.props
+                .iter()
+                .position(|p| p.name == name)
+                .ok_or_else(|| PlyError::MissingProperty(name.to_string()))
+        };
+        Ok(Self {
+            mean: [idx("x")?, idx("y")?, idx("z")?],
+            dc: [idx("f_dc_0")?, idx("f_dc_1")?, idx("f_dc_2")?],
+            opacity: idx("opacity")?,
+            scale: [idx("scale_0")?, idx("scale_1")?, idx("scale_2")?],
+            rot: [idx("rot_0")?, idx("rot_1")?, idx("rot_2")?, idx("rot_3")?],
+            label: idx("label").ok(),
+        })
+    }
+
+    fn gaussian(&self, v: &[f64], vertex: usize) -> Result<Gaussian, PlyError> {
+        let f = |i: usize| v[i] as f32;
+        let label = match self.label {
+            None => 0,
+            Some(i) if v[i] >= 0.0 && v[i] <= u32::MAX as f64 && v[i].fract() == 0.0 => v[i] as u32,
+            Some(i) => {
+                return Err(PlyError::Invalid {
+                    vertex,
+                    msg: format!("label {} is not a u32", v[i]),
+                })
+            }
+        };
+        let mut rot = self.rot.map(f);
+        let n2: f32 = rot.iter().map(|q| q * q).sum();
+        if !(n2.is_finite() && n2 > 0.0) {
+            return Err(PlyError::Invalid {
+                vertex,
+                msg: "rotation has zero or non-finite norm".into(),
+            });
+        }
+        // Already-unit quaternions are kept bit-exact (round trips), others normalised.
+        if (n2 - 1.0).abs() > 1e-6 {
+            let n = n2.sqrt();
+            rot = rot.map(|q| q / n);
+        }
+        Ok(Gaussian {
+            mean: self.mean.map(f),
+            rotation: rot,
+            log_scale: self.scale.map(f),
+            opacity_logit: f(self.opacity),
+            sh_dc: self.dc.map(f),
+            label,
+        })
+    }
+}
+
+/// Parses a PLY file's bytes into a map (SH beyond degree 0 ignored; no `label` → 0).
+pub fn read_ply(data: &[u8]) -> Result<GaussianMap, PlyError> {
+    let header = parse_header(data)?;
+    let vi = header
+        .elements
+        .iter()
+        .position(|e| e.name == "vertex")
+        .ok_or(PlyError::NoVertexElement)?;
+    let vertex = &header.elements[vi];
+    let cols = Columns::find(vertex)?;
+    let mut map = GaussianMap::with_capacity(vertex.count);
+    let mut values = vec![0.0f64; vertex.props.len()];
+    match header.format {
+        Format::Ascii => {
+            let text = std::str::from_utf8(&data[header.body..]).map_err(|_| PlyError::Ascii {
+                line: header.lines + 1,
+                msg: "body is not text".into(),
+            })?;
+            let mut lines = text
+                .lines()
+                .enumerate()
+                .map(|(i, l)| (header.lines + 1 + i, l));
+            let skip: usize = header.elements[..vi].iter().map(|e| e.count).sum();
+            for _ in 0..skip {
+                lines.next();
+            }
+            for v in 0..vertex.count {
+                let Some((line, text)) = lines.next() else {
+                    return Err(PlyError::Truncated {
+                        vertex: v,
+                        count: vertex.count,
+                        property: vertex.props[0].name.clone(),
+                    });
+                };
+                let mut toks = text.split_whitespace();
+                for (k, prop) in vertex.props.iter().enumerate() {
+                    let Some(tok) = toks.next() else {
+                        return Err(PlyError::Ascii {
+                            line,
+                            msg: format!("vertex {v}: missing value for property '{}'", prop.name),
+                        });
+                    };
+                    values[k] = tok.parse().map_err(|_| PlyError::Ascii {
+                        line,
+                        msg: format!(
+                            "vertex {v}: property '{}': '{tok}' is not a number",
+                            prop.name
+                        ),
+                    })?;
+                }
+                if toks.next().is_some() {
+                    return Err(PlyError::Ascii {
+                        line,
+                        msg: format!("vertex {v}: more than {} values", vertex.props.len()),
+                    });
+                }
+                map.push(cols.gaussian(&values, v)?);
+            }
+        }
+        Format::BinaryLe | Format::BinaryBe => {
+            let little = header.format == Format::BinaryLe;
+            let record_size = |e: &Element| -> Result<usize, PlyError> {
+                e.props.iter().try_fold(0, |acc, p| match p.kind {
+                    Some(k) => Ok(acc + k.size()),
+                    None => Err(PlyError::Unsupported(format!(
+                        "list property '{}' in binary element '{}' before/in vertex",
+                        p.name, e.name
+                    ))),
+                })
+            };
+            let mut offset = header.body;
+            for e in &header.elements[..vi] {
+                offset += record_size(e)? * e.count;
+            }
+            let stride = record_size(vertex)?;
+            let body = data.get(offset..).unwrap_or(&[]);
+            let needed = stride * vertex.count;
+            if body.len() < needed {
+                let v = body.len() / stride.max(1);
+                let mut within = body.len() - v * stride;
+                let mut property = String::new();
+                for p in &vertex.props {
+                    property = p.name.clone();
+                    let size = p.kind.map_or(0, Scalar::size);
+                    if within < size {
+                        break;
+                    }
+                    within -= size;
+                }
+                return Err(PlyError::Truncated {
+                    vertex: v,
+                    count: vertex.count,
+                    property,
+                });
+            }
+            let kinds: Vec<Scalar> = vertex.props.iter().filter_map(|p| p.kind).collect();
+            for (v, rec) in body[..needed].chunks_exact(stride).enumerate() {
+                let mut o = 0;
+                for (k, kind) in kinds.iter().enumerate() {
+                    values[k] = kind.read(&rec[o..], little);
+                    o += kind.size();
+                }
+                map.push(cols.gaussian(&values, v)?);
+            }
+        }
+    }
+    Ok(map)
+}
+
+/// Reads a PLY file from disk.
+pub fn read_ply_file(path: impl AsRef<Path>) -> Result<GaussianMap, PlyError> {
+    let path = path.as_ref();
+    let data = std::fs::read(path).map_err(|source| PlyError::Io {
+        path: path.display().to_string(),
+        source,
+    })?;
+    read_ply(&data)
+}
+
+/// Writes the map as binary little-endian 3DGS PLY, SH degree 0, with a `label` property.
+pub fn write_ply(map: &GaussianMap, mut out: impl Write) -> std::io::Result<()> {
+    let mut header = format!(
+        "ply\nformat binary_little_endian 1.0\ncomment opengs\nelement vertex {}\n",
+        map.len()
+    );
+    for name in [
+        "x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2", "opacity", "scale_0",
+        "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3",
+    ] {
+        header.push_str(&format!("property float {name}\n"));
+    }
+    header.push_str("property uint label\nend_header\n");
+    out.write_all(header.as_bytes())?;
+    let mut buf = Vec::with_capacity(map.len() * 72);
+    for i in 0..map.len() {
+        let floats = map.means[i]
+            .iter()
+            .chain(&[0.0f32; 3])
+            .chain(&map.sh_dc[i])
+            .chain(std::iter::once(&map.opacity_logits[i]))
+            .chain(&map.log_scales[i])
+            .chain(&map.rotations[i]);
+        for v in floats {
+            buf.extend_from_slice(&v.to_le_bytes());
+        }
+        buf.extend_from_slice(&map.labels[i].to_le_bytes());
+    }
+    out.write_all(&buf)
+}
+
+/// Writes the map to a file (see [`write_ply`]).
+pub fn write_ply_file(map: &GaussianMap, path: impl AsRef<Path>) -> Result<(), PlyError> {
+    let path = path.as_ref();
+    let io = |source| PlyError::Io {
+        path: path.display().to_string(),
+        source,
+    };
+    let file = std::fs::File::create(path).map_err(io)?;
+    let mut w = std::io::BufWriter::new(file);
+    write_ply(map, &mut w).map_err(io)?;
+    w.flush().map_err(io)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scene::indoor_scene;
+
+    fn bits(m: &GaussianMap) -> Vec<u32> {
+        let mut v = Vec::new();
+        for i in 0..m.len() {
+            let g = m.get(i);
+            v.extend(
+                g.mean
+                    .iter()
+                    .chain(&g.rotation)
+                    .chain(&g.log_scale)
+                    .map(|f| f.to_bits()),
+            );
+            v.push(g.opacity_logit.to_bits());
+            v.extend(g.sh_dc.iter().map(|f| f.to_bits()));
+            v.push(g.label);
+        }
+        v
+    }
+
+    #[test]
+    fn round_trip_is_bit_identical() {
+        let mut map = indoor_scene(500, 3);
+        map.labels[7] = u32::MAX;
+        map.sh_dc[3] = [-0.0, 1e-30, -7.25];
+        let mut buf = Vec::new();
+        write_ply(&map, &mut buf).expect("write to memory");
+        let back = read_ply(&buf).expect("read back");
+        assert_eq!(back.len(), 500);
+        assert_eq!(bits(&back), bits(&map));
+        // And the file written again is byte-identical.
+        let mut buf2 = Vec::new();
+        write_ply(&back, &mut buf2).expect("write to memory");
+        assert_eq!(buf, buf2);
+    }
+
+    #[test]
+    fn ascii_sh3_without_label_loads() {
+        let mut text = String::from("ply\nformat ascii 1.0\nelement vertex 2\n");
+        for p in [
+            "x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2",
+        ] {
+            text += &format!("property float {p}\n");
+        }
+        for i in 0..45 {
+            text += &format!("property float f_rest_{i}\n");
+        }
+        for p in [
+            "opacity", "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3",
+        ] {
+            text += &format!("property float {p}\n");
+        }
+        text += "end_header\n";
+        let rest = vec!["0.5"; 45].join(" ");
+        // Second rotation (2, 0, 0, 0) is not unit: normalised to (1, 0, 0, 0).
+        text += &format!("1 2 3 0 0 1 0.1 0.2 0.3 {rest} -1.5 -4 -4.5 -5 1 0 0 0\n");
+        text += &format!("-1 0.5 2 0 0 1 -0.1 0 0 {rest} 2 -3 -3 -3 2 0 0 0\n");
+        let map = read_ply(text.as_bytes()).expect("valid ascii ply");
+        assert_eq!(map.len(), 2);
+        assert_eq!(map.means[0], [1.0, 2.0, 3.0]);
+        assert_eq!(map.sh_dc[0], [0.1, 0.2, 0.3]);
+        assert_eq!(map.opacity_logits[0], -1.5);
+        assert_eq!(map.log_scales[0], [-4.0, -4.5, -5.0]);
+        assert_eq!(map.rotations[1], [1.0, 0.0, 0.0, 0.0]);
+        assert_eq!(map.labels, vec![0, 0]);
+    }
+
+    #[test]
+    fn truncated_binary_names_vertex_and_property() {
+        let map = indoor_scene(10, 1);
+        let mut buf = Vec::new();
+        write_ply(&map, &mut buf).expect("write to memory");
+        // Cut inside vertex 9: 72 bytes per vertex, keep 9 full ones + 18 bytes (x y z nx complete, into ny).
+        let header_len = buf.len() - 10 * 72;
+        let err = read_ply(&buf[..header_len + 9 * 72 + 18]).expect_err("truncated");
+        match &err {
+            PlyError::Truncated {
+                vertex: 9,
+                count: 10,
+                property,
+            } => assert_eq!(property, "ny"),
+            other => panic!("unexpected error {other}"),
+        }
+        assert!(err.to_string().contains("vertex 9"));
+    }
+
+    #[test]
+    fn malformed_files_name_the_problem() {
+        let no_rot =
+            "ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\n\
+                      property float z\nproperty float f_dc_0\nproperty float f_dc_1\n\
+                      property float f_dc_2\nproperty float opacity\nproperty float scale_0\n\
+                      property float scale_1\nproperty float scale_2\nend_header\n";
+        let err = read_ply(no_rot.as_bytes()).expect_err("no rotation");
+        assert!(err.to_string().contains("rot_0"), "{err}");
+
+        let header = "ply\nformat ascii 1.0\nelement vertex 2\nproperty float x\nproperty float y\n\
+                      property float z\nproperty float f_dc_0\nproperty float f_dc_1\n\
+                      property float f_dc_2\nproperty float opacity\nproperty float scale_0\n\
+                      property float scale_1\nproperty float scale_2\nproperty float rot_0\n\
+                      property float rot_1\nproperty float rot_2\nproperty float rot_3\nend_header\n";
+        let bad_number =
+            format!("{header}0 0 0 0 0 0 0 0 0 0 1 0 0 0\n0 0 zz 0 0 0 0 0 0 0 1 0 0 0\n");
+        let err = read_ply(bad_number.as_bytes()).expect_err("bad number");
+        assert!(
+            err.to_string().contains("line 20") && err.to_string().contains("'z'"),
+            "{err}"
+        );
+        let short = format!("{header}0 0 0 0 0 0 0 0 0 0 1 0 0 0\n");
+        let err = read_ply(short.as_bytes()).expect_err("missing vertex");
+        assert!(err.to_string().contains("vertex 1 of 2"), "{err}");
+        let err = read_ply(b"ply\nformat binary_little_endian 1.0\nelement vertex 3\n")
+            .expect_err("no end");
+        assert!(err.to_string().contains("end_header"), "{err}");
+        assert!(read_ply(b"PLY\n").is_err());
+    }
+}

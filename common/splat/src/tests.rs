@@ -1,0 +1,344 @@
+//! Renderer tests with hand-worked numbers, plus fast-vs-reference on a random scene.
+
+use opengs_geometry::{Intrinsics, Pose};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+use crate::map::{Gaussian, GaussianMap};
+use crate::output::RenderRequest;
+use crate::reference::render_reference;
+use crate::render::render;
+use crate::Camera;
+
+fn camera(near: f32) -> Camera {
+    // Principal point on pixel (32, 24); identity pose: camera at origin looking down +z.
+    Camera::from_pose(
+        Intrinsics::new(100.0, 100.0, 32.0, 24.0, 64, 48),
+        &Pose::identity(),
+        near,
+    )
+}
+
+fn blob(z: f32, sigma: f32, opacity: f32, color: [f32; 3], label: u32) -> Gaussian {
+    Gaussian::from_values(
+        [0.0, 0.0, z],
+        [1.0, 0.0, 0.0, 0.0],
+        [sigma; 3],
+        opacity,
+        color,
+        label,
+    )
+}
+
+fn map_of(gs: &[Gaussian]) -> GaussianMap {
+    let mut m = GaussianMap::new();
+    for g in gs {
+        m.push(*g);
+    }
+    m
+}
+
+fn close(a: f32, b: f32, tol: f32) -> bool {
+    (a - b).abs() <= tol
+}
+
+#[test]
+fn single_gaussian_head_on_matches_hand_values() {
+    let map = map_of(&[blob(2.0, 0.02, 0.8, [0.2, 0.4, 0.6], 7)]);
+    let r = render(&map, &camera(0.05), &RenderRequest::semantic(50));
+    // Σ' = (fx/z)²σ² + 0.3 = 50²·0.02² + 0.3 = 1.3; λmax = 1.3 + sqrt(0.1) → radius ceil(3·1.2713) = 4.
+    assert_eq!(r.projected.radii[0], 4);
+    assert!(close(r.projected.conics[0][0], 1.0 / 1.3, 1e-6));
+    assert_eq!(r.projected.means2d[0], [32.0, 24.0]);
+    let o = &r.output;
+    let c = o.index(32, 24);
+    // Centre: α = 0.8, T = 1.
+    for (got, want) in o.color[c].iter().zip([0.16, 0.32, 0.48]) {
+        assert!(close(*got, want, 1e-6), "{got} vs {want}");
+    }
+    assert!(close(o.depth[c], 1.6, 1e-6));
+    assert!(close(o.silhouette[c], 0.8, 1e-6));
+    assert!(close(o.final_transmittance[c], 0.2, 1e-6));
+    // One pixel right: α = 0.8·exp(−0.5/1.3) = 0.544570.
+    let n = o.index(33, 24);
+    assert!(
+        close(o.silhouette[n], 0.544_570, 1e-5),
+        "{}",
+        o.silhouette[n]
+    );
+    let labels = o.labels.as_ref().expect("asked for");
+    assert_eq!(labels[c], 7);
+    assert_eq!(labels[o.index(0, 0)], 0);
+    let tk = o.top_k.as_ref().expect("asked for");
+    let (ids, ws) = tk.pixel(32, 24);
+    assert_eq!(ids, &[0]);
+    assert!(close(ws[0], 0.8, 1e-6));
+    assert_eq!(tk.pixel(0, 0).0.len(), 0);
+    let vis = o.visible_per_label.as_ref().expect("asked for");
+    assert_eq!(vis.get(&7), Some(&1));
+    assert_eq!(vis.len(), 1);
+}
+
+#[test]
+fn voted_label_flips_with_front_opacity() {
+    // Centre pixel: w_front = o, w_back = 0.9·(1 − o): the front wins iff o > 0.9/1.9 ≈ 0.474.
+    for (o_front, want) in [(0.4f32, 2u32), (0.6, 1)] {
+        let map = map_of(&[
+            blob(2.0, 0.02, o_front, [1.0, 0.0, 0.0], 1),
+            blob(3.0, 0.02, 0.9, [0.0, 1.0, 0.0], 2),
+        ]);
+        let r = render(&map, &camera(0.05), &RenderRequest::semantic(50));
+        let o = &r.output;
+        assert_eq!(o.labels.as_ref().expect("asked")[o.index(32, 24)], want);
+        let (ids, ws) = o.top_k.as_ref().expect("asked").pixel(32, 24);
+        let (w_front, w_back) = (o_front, 0.9 * (1.0 - o_front));
+        let expect: Vec<(u32, f32)> = if w_back > w_front {
+            vec![(1, w_back), (0, w_front)]
+        } else {
+            vec![(0, w_front), (1, w_back)]
+        };
+        assert_eq!(ids, &[expect[0].0, expect[1].0]);
+        assert!(close(ws[0], expect[0].1, 1e-6) && close(ws[1], expect[1].1, 1e-6));
+    }
+}
+
+#[test]
+fn label_zero_never_beats_a_real_label() {
+    // Front background Gaussian has the larger weight (0.9 vs 0.09) but label 0 never wins.
+    let map = map_of(&[
+        blob(2.0, 0.02, 0.9, [1.0; 3], 0),
+        blob(3.0, 0.02, 0.9, [1.0; 3], 5),
+    ]);
+    let r = render(&map, &camera(0.05), &RenderRequest::semantic(50));
+    assert_eq!(
+        r.output.labels.as_ref().expect("asked")[r.output.index(32, 24)],
+        5
+    );
+}
+
+#[test]
+fn top_k_orders_by_weight_and_truncates() {
+    // Front to back opacities; weights w = αT: 0.1, 0.45, 0.09, 0.216, 0.0432, 0.00504.
+    let ops = [0.1f32, 0.5, 0.2, 0.6, 0.3, 0.05];
+    let gs: Vec<Gaussian> = ops
+        .iter()
+        .enumerate()
+        .map(|(i, &o)| blob(2.0 + 0.1 * i as f32, 0.02, o, [0.5; 3], i as u32 + 1))
+        .collect();
+    let map = map_of(&gs);
+    let r = render(&map, &camera(0.05), &RenderRequest::semantic(3));
+    let (ids, ws) = r.output.top_k.as_ref().expect("asked").pixel(32, 24);
+    assert_eq!(ids, &[1, 3, 0]);
+    for (got, want) in ws.iter().zip([0.45f32, 0.216, 0.1]) {
+        assert!(close(*got, want, 1e-6), "{got} vs {want}");
+    }
+    let r = render(&map, &camera(0.05), &RenderRequest::semantic(50));
+    let (ids, _) = r.output.top_k.as_ref().expect("asked").pixel(32, 24);
+    assert_eq!(ids, &[1, 3, 0, 2, 4, 5]);
+}
+
+#[test]
+fn near_plane_culls() {
+    let map = map_of(&[
+        blob(0.04, 0.001, 0.9, [1.0; 3], 3),
+        blob(-1.0, 0.02, 0.9, [1.0; 3], 4),
+    ]);
+    let r = render(&map, &camera(0.05), &RenderRequest::semantic(50));
+    assert!(r.output.silhouette.iter().all(|&s| s == 0.0));
+    assert!(r
+        .output
+        .visible_per_label
+        .as_ref()
+        .expect("asked")
+        .is_empty());
+    assert!(r.bins.ids.is_empty());
+    // Same Gaussian with the near plane moved closer is rendered.
+    let r = render(&map, &camera(0.03), &RenderRequest::semantic(50));
+    assert!(r.output.silhouette[r.output.index(32, 24)] > 0.89);
+}
+
+#[test]
+fn transmittance_saturation_stops_compositing() {
+    // α = 0.95 each: T = 0.05, 0.0025, 1.25e-4; the 4th would leave 6.25e-6 < 1e-4 → stop.
+    let colors = [
+        [1.0, 0.0, 0.0],
+        [0.0, 1.0, 0.0],
+        [0.0, 0.0, 1.0],
+        [1.0, 1.0, 1.0],
+        [1.0, 1.0, 1.0],
+    ];
+    let gs: Vec<Gaussian> = colors
+        .iter()
+        .enumerate()
+        .map(|(i, &c)| {
+            blob(
+                2.0 + 0.1 * i as f32,
+                0.02,
+                0.95,
+                c,
+                if i < 3 { 1 } else { 9 },
+            )
+        })
+        .collect();
+    let map = map_of(&gs);
+    let r = render(&map, &camera(0.05), &RenderRequest::semantic(50));
+    let o = &r.output;
+    let c = o.index(32, 24);
+    assert_eq!(o.n_contrib[c], 3);
+    assert!(close(o.final_transmittance[c], 1.25e-4, 1e-8));
+    assert!(close(o.silhouette[c], 1.0 - 1.25e-4, 1e-6));
+    for (got, want) in o.color[c].iter().zip([0.95, 0.0475, 0.002375]) {
+        assert!(close(*got, want, 1e-6), "{got} vs {want}");
+    }
+    assert_eq!(o.top_k.as_ref().expect("asked").pixel(32, 24).0, &[0, 1, 2]);
+    assert_eq!(o.labels.as_ref().expect("asked")[c], 1);
+}
+
+fn random_scene(n: usize, seed: u64) -> GaussianMap {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let mut m = GaussianMap::new();
+    for _ in 0..n {
+        let z: f32 = rng.gen_range(-0.5..4.0);
+        let q: [f32; 4] = std::array::from_fn(|_| rng.gen_range(-1.0..1.0));
+        let scale: [f32; 3] =
+            std::array::from_fn(|_| rng.gen_range(0.005f32.ln()..0.3f32.ln()).exp());
+        m.push(Gaussian::from_values(
+            [rng.gen_range(-1.5..1.5), rng.gen_range(-1.2..1.2), z],
+            q,
+            scale,
+            rng.gen_range(0.002..0.999),
+            std::array::from_fn(|_| rng.gen_range(-0.1..1.1)),
+            rng.gen_range(0..6),
+        ));
+    }
+    m
+}
+
+#[test]
+fn fast_matches_reference_on_random_scene() {
+    // 72×52: partial tiles on both axes; K = 8 so truncation happens.
+    let k = Intrinsics::new(60.0, 62.0, 35.5, 25.0, 72, 52);
+    let pose = crate::scene::look_at([0.1, -0.2, -0.3], [0.0, 0.0, 2.0]);
+    for seed in 0..3 {
+        let map = random_scene(600, seed);
+        let cam = Camera::from_pose(k, &pose, 0.1);
+        let fast = render(&map, &cam, &RenderRequest::semantic(8)).output;
+        let slow = render_reference(&map, &cam, 8);
+        let mut max_diff = 0.0f32;
+        for p in 0..fast.color.len() {
+            for c in 0..3 {
+                max_diff = max_diff.max((fast.color[p][c] - slow.color[p][c]).abs());
+            }
+            max_diff = max_diff.max((fast.depth[p] - slow.depth[p]).abs());
+            max_diff = max_diff.max((fast.silhouette[p] - slow.silhouette[p]).abs());
+        }
+        assert!(max_diff <= 1e-4, "seed {seed}: max diff {max_diff}");
+        assert_eq!(
+            fast.labels.as_ref().expect("asked"),
+            &slow.labels,
+            "seed {seed}"
+        );
+        let tk = fast.top_k.as_ref().expect("asked");
+        let mut truncated = 0;
+        for y in 0..k.height {
+            for x in 0..k.width {
+                let (ids, ws) = tk.pixel(x, y);
+                let want = &slow.top_k[(y * k.width + x) as usize];
+                let got: Vec<(u32, f32)> = ids.iter().copied().zip(ws.iter().copied()).collect();
+                assert_eq!(&got, want, "seed {seed} pixel ({x}, {y})");
+                truncated += (ids.len() == 8) as usize;
+            }
+        }
+        assert!(truncated > 0, "test should exercise truncation");
+        assert_eq!(
+            fast.visible_per_label.as_ref().expect("asked"),
+            &slow.visible_per_label
+        );
+        // On-demand top-K replays give the same lists.
+        let again = render(&map, &cam, &RenderRequest::color_depth());
+        for (x, y) in [(0, 0), (35, 25), (71, 51), (10, 40), (60, 3)] {
+            let (ids, ws) = tk.pixel(x, y);
+            let want: Vec<(u32, f32)> = ids.iter().copied().zip(ws.iter().copied()).collect();
+            assert_eq!(
+                again.top_k_at(x, y, 8),
+                want,
+                "seed {seed} pixel ({x}, {y})"
+            );
+        }
+        // The cheap request renders the same images bit for bit.
+        let plain = render(&map, &cam, &RenderRequest::color_depth()).output;
+        assert_eq!(plain.color, fast.color);
+        assert_eq!(plain.depth, fast.depth);
+        assert!(plain.labels.is_none() && plain.top_k.is_none());
+    }
+}
+
+#[test]
+fn random_scene_exercises_the_renderer() {
+    // Guards the comparison above against passing on an empty image.
+    let k = Intrinsics::new(60.0, 62.0, 35.5, 25.0, 72, 52);
+    let pose = crate::scene::look_at([0.1, -0.2, -0.3], [0.0, 0.0, 2.0]);
+    let map = random_scene(600, 0);
+    let out = render(
+        &map,
+        &Camera::from_pose(k, &pose, 0.1),
+        &RenderRequest::semantic(8),
+    )
+    .output;
+    let covered = out.silhouette.iter().filter(|&&s| s > 0.5).count();
+    assert!(covered > out.silhouette.len() / 2, "covered {covered}");
+    let labels = out.labels.expect("asked");
+    let distinct: std::collections::BTreeSet<u32> = labels.iter().copied().collect();
+    assert!(distinct.len() >= 4, "{distinct:?}");
+    assert!(out.n_contrib.iter().any(|&n| n > 8));
+}
+
+#[test]
+fn unsorted_top_k_is_the_same_set_front_to_back() {
+    let ops = [0.1f32, 0.5, 0.2, 0.6, 0.3, 0.05];
+    let gs: Vec<Gaussian> = ops
+        .iter()
+        .enumerate()
+        .map(|(i, &o)| blob(2.0 + 0.1 * i as f32, 0.02, o, [0.5; 3], i as u32 + 1))
+        .collect();
+    let req = RenderRequest {
+        sort_top_k: false,
+        ..RenderRequest::semantic(3)
+    };
+    let r = render(&map_of(&gs), &camera(0.05), &req);
+    let (ids, ws) = r.output.top_k.as_ref().expect("asked").pixel(32, 24);
+    assert_eq!(ids, &[0, 1, 3]);
+    assert!(close(ws[1], 0.45, 1e-6));
+}
+
+#[test]
+fn top_k_of_a_long_list_matches_the_formula() {
+    // 40 stacked Gaussians (longer than the branch-free ranking path), opacities cycling.
+    let ops: Vec<f32> = (0..40)
+        .map(|i| 0.02 + 0.03 * ((i * 7) % 11) as f32)
+        .collect();
+    let gs: Vec<Gaussian> = ops
+        .iter()
+        .enumerate()
+        .map(|(i, &o)| blob(2.0 + 0.01 * i as f32, 0.02, o, [0.5; 3], 1))
+        .collect();
+    let map = map_of(&gs);
+    // Centre pixel: w_i = α_i·Π_{j<i}(1 − α_j), with α = the stored opacity.
+    let mut t = 1.0f32;
+    let mut want: Vec<(u32, f32)> = Vec::new();
+    for i in 0..40 {
+        let a = map.opacity(i);
+        want.push((i as u32, a * t));
+        t *= 1.0 - a;
+    }
+    want.sort_by(|a, b| b.1.total_cmp(&a.1));
+    for k in [10usize, 50] {
+        let r = render(&map, &camera(0.05), &RenderRequest::semantic(k));
+        let (ids, ws) = r.output.top_k.as_ref().expect("asked").pixel(32, 24);
+        assert_eq!(ids.len(), k.min(40));
+        for (j, (&id, &w)) in ids.iter().zip(ws).enumerate() {
+            assert_eq!(id, want[j].0, "k={k} position {j}");
+            assert!(close(w, want[j].1, 1e-6));
+        }
+    }
+}

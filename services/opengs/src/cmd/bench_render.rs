@@ -1,0 +1,41 @@
+//! `opengs bench-render`: the renderer benchmark (median ms per frame) on synthetic scenes.
+
+use opengs_splat::args;
+use opengs_splat::bench::{run_render_bench, BenchConfig};
+
+#[derive(Debug, clap::Args)]
+pub struct BenchRenderArgs {
+    /// Scene sizes (number of Gaussians), comma-separated.
+    #[arg(long, value_delimiter = ',', default_values_t = [100_000usize, 500_000])]
+    pub gaussians: Vec<usize>,
+    /// Image sizes, comma-separated WxH (focal 525 at 640 wide, scaled; centred principal point).
+    #[arg(long, value_parser = args::parse_size, value_delimiter = ',', default_values = ["640x480", "1200x680"])]
+    pub sizes: Vec<(u32, u32)>,
+    /// Timed frames per case (median reported).
+    #[arg(long, default_value_t = 9)]
+    pub frames: usize,
+    /// K of the per-pixel top-K.
+    #[arg(long, default_value_t = 50)]
+    pub top_k: usize,
+}
+
+pub fn run(args: BenchRenderArgs) -> anyhow::Result<()> {
+    anyhow::ensure!(args.frames > 0, "--frames must be at least 1");
+    anyhow::ensure!(args.top_k > 0, "--top-k must be at least 1");
+    anyhow::ensure!(
+        args.gaussians.iter().all(|&n| n > 0),
+        "--gaussians must be positive"
+    );
+    let cfg = BenchConfig {
+        gaussian_counts: args.gaussians,
+        intrinsics: args
+            .sizes
+            .iter()
+            .map(|&(w, h)| opengs_splat::bench::intrinsics_for_size(w, h))
+            .collect(),
+        frames: args.frames,
+        top_k: args.top_k,
+    };
+    print!("{}", run_render_bench(&cfg));
+    Ok(())
+}

@@ -1,0 +1,10 @@
+pub mod bench;
+pub mod bench_gicp;
+pub mod bench_ipc;
+pub mod bench_render;
+pub mod ctl;
+pub mod profile;
+pub mod register;
+pub mod render;
+pub mod run;
+pub mod synth;

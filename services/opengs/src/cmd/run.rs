@@ -1,0 +1,100 @@
+//! `opengs run`: the main job.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use opengs_pipeline::{DatasetArgs, DeployFile, RunOptions, RunSummary, Supervisor};
+
+#[derive(clap::Args)]
+pub struct RunArgs {
+    #[command(flatten)]
+    pub dataset: DatasetArgs,
+    /// Deploy file: a path, or `desktop` / `edge` for the built-in ones.
+    #[arg(long, default_value = "desktop")]
+    pub deploy: PathBuf,
+    /// Run directory (default: runs/<timestamp>/).
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Sensor rate cap in frames/s (default: the dataset's rate; 0 = as fast as possible).
+    #[arg(long)]
+    pub max_rate: Option<f64>,
+    /// Start tracking at the ground-truth first pose instead of the identity.
+    #[arg(long)]
+    pub gt_first_pose: bool,
+    /// No progress bar or progress lines.
+    #[arg(long)]
+    pub quiet: bool,
+    /// Run id namespacing the shared-memory services (default: timestamp and pid).
+    #[arg(long)]
+    pub run_id: Option<String>,
+}
+
+pub fn run(args: RunArgs) -> anyhow::Result<()> {
+    let deploy = DeployFile::load(&args.deploy)?;
+    // Validate the dataset here so a typo fails before any process starts.
+    let spec = args.dataset.spec()?;
+    opengs_datasets::open_dataset(&spec)?;
+    let now = chrono::Local::now();
+    let run_id = args
+        .run_id
+        .clone()
+        .unwrap_or_else(|| format!("{}-{}", now.format("%Y%m%d-%H%M%S"), std::process::id()));
+    let out_dir = args
+        .out
+        .clone()
+        .unwrap_or_else(|| Path::new("runs").join(now.format("%Y%m%d-%H%M%S").to_string()));
+    let mut stage_args = BTreeMap::new();
+    if args.gt_first_pose {
+        stage_args.insert("tracker".to_string(), vec!["--gt-first-pose".to_string()]);
+    }
+    eprintln!(
+        "opengs run {run_id}: dataset {}, deploy {} ({}), output {}",
+        args.dataset.dataset,
+        args.deploy.display(),
+        deploy.description,
+        out_dir.display()
+    );
+    let summary = Supervisor::run(RunOptions {
+        deploy,
+        dataset: args.dataset.clone(),
+        out_dir: out_dir.clone(),
+        run_id,
+        max_rate: args.max_rate,
+        stage_args,
+        progress: !args.quiet,
+    })?;
+    print_summary(&summary);
+    Ok(())
+}
+
+fn print_summary(s: &RunSummary) {
+    let fps = s.poses as f64 / s.elapsed_s.max(1e-9);
+    println!(
+        "\n{} in {:.1} s: {} frames published, {} poses ({:.1} fps), {} keyframes, {} tracking failures",
+        if s.interrupted { "interrupted" } else { "finished" },
+        s.elapsed_s,
+        s.frames_published,
+        s.poses,
+        fps,
+        s.keyframes,
+        s.tracking_failures
+    );
+    let restarts: Vec<String> = s
+        .restarts
+        .iter()
+        .filter(|(_, &r)| r > 0)
+        .map(|(n, r)| format!("{n} ×{r}"))
+        .collect();
+    if !restarts.is_empty() {
+        println!("restarts: {}", restarts.join(", "));
+    }
+    println!("\nper-stage latency:\n{}", s.latency.table());
+    if !s.leftover_files.is_empty() {
+        println!(
+            "warning: {} shared-memory files remain: {:?}",
+            s.leftover_files.len(),
+            s.leftover_files
+        );
+    }
+    println!("outputs: {}", s.out_dir.display());
+}
