@@ -5,11 +5,13 @@
 pub mod dataset_args;
 pub mod deploy;
 pub mod logging;
+pub mod metrics;
 pub mod recorder;
 pub mod sensor;
 pub mod stage_process;
 pub mod status;
 pub mod supervisor;
+pub mod tracker_stage;
 
 pub use dataset_args::DatasetArgs;
 pub use deploy::{DeployFile, StageSpec};

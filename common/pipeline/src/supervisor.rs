@@ -51,6 +51,7 @@ pub struct RunSummary {
     /// Files of this run still in /dev/shm or the iceoryx2 root after shutdown (should be none).
     pub leftover_files: Vec<PathBuf>,
     pub recorder: Recorder,
+    pub metrics: Option<crate::metrics::RunMetrics>,
 }
 
 /// Why the main loop ended.
@@ -120,6 +121,17 @@ impl Supervisor {
         }
         // Outputs are written on every path: nothing produced is lost.
         state.write_outputs(&opts.out_dir)?;
+        let metrics = if state.recorder.is_empty() {
+            None
+        } else {
+            match crate::metrics::evaluate_run(&opts.out_dir) {
+                Ok(m) => Some(m),
+                Err(e) => {
+                    eprintln!("metrics: {e:#}");
+                    None
+                }
+            }
+        };
         let latency = state.profile.report();
         let summary = RunSummary {
             out_dir: opts.out_dir.clone(),
@@ -137,6 +149,7 @@ impl Supervisor {
             interrupted: matches!(ending, Ok(Ending::Interrupted)),
             leftover_files,
             recorder: std::mem::take(&mut state.recorder),
+            metrics,
         };
         match ending? {
             Ending::StageFailed(why) => Err(anyhow::anyhow!(

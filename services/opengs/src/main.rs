@@ -22,6 +22,8 @@ enum Command {
     Run(cmd::run::RunArgs),
     /// Talk to a running pipeline: status, stop.
     Ctl(cmd::ctl::CtlArgs),
+    /// Recompute a finished run's metrics (ATE) from its files.
+    Eval(cmd::eval::EvalArgs),
     /// Print the per-stage latency table of a finished run.
     Profile(cmd::profile::ProfileArgs),
     /// Write the synthetic room as a TUM or Replica dataset with ground truth.
@@ -43,6 +45,7 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Run(a) => cmd::run::run(a),
         Command::Ctl(a) => cmd::ctl::run(a),
+        Command::Eval(a) => cmd::eval::run(a),
         Command::Profile(a) => cmd::profile::run(a),
         Command::Synth(a) => cmd::synth::run(a),
         Command::Render(a) => cmd::render::run(a),

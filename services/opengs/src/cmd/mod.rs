@@ -3,6 +3,7 @@ pub mod bench_gicp;
 pub mod bench_ipc;
 pub mod bench_render;
 pub mod ctl;
+pub mod eval;
 pub mod profile;
 pub mod register;
 pub mod render;

@@ -88,6 +88,14 @@ fn print_summary(s: &RunSummary) {
     if !restarts.is_empty() {
         println!("restarts: {}", restarts.join(", "));
     }
+    if let Some(m) = &s.metrics {
+        if let (Some(rmse), Some(mean)) = (m.ate_rmse_cm, m.ate_mean_cm) {
+            println!(
+                "ATE (Umeyama, no scale): RMSE {rmse:.3} cm, mean {mean:.3} cm over {} frames",
+                m.frames
+            );
+        }
+    }
     println!("\nper-stage latency:\n{}", s.latency.table());
     if !s.leftover_files.is_empty() {
         println!(

@@ -1,0 +1,54 @@
+use opengs_geometry::{Intrinsics, Pose};
+
+use crate::DatasetError;
+
+/// One RGB-D frame as published by the sensor stage: plain owned buffers,
+/// depth kept as u16 so a 640x480 frame stays ~1.5 MB.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RgbdFrame {
+    pub index: usize,
+    /// Capture time in seconds.
+    pub timestamp: f64,
+    pub width: u32,
+    pub height: u32,
+    /// Row-major RGB8, `width * height * 3` bytes.
+    pub rgb: Vec<u8>,
+    /// Row-major depth; 0 = missing; metres = value / depth_scale.
+    pub depth: Vec<u16>,
+    /// Depth units per metre (TUM 5000, Replica 6553.5).
+    pub depth_scale: f32,
+    /// Ground-truth camera-to-world pose when the dataset has one.
+    pub gt_pose: Option<Pose>,
+    /// Instance id per pixel (0 = none) when the dataset has labels.
+    pub labels: Option<Vec<u16>>,
+}
+
+impl RgbdFrame {
+    /// Metric depth of pixel (u, v); `None` where depth is missing.
+    pub fn depth_m(&self, u: u32, v: u32) -> Option<f32> {
+        let d = *self.depth.get((v * self.width + u) as usize)?;
+        (d != 0).then(|| d as f32 / self.depth_scale)
+    }
+}
+
+/// Instance id → class name entry of a dataset's ground-truth class table.
+#[derive(Debug, Clone, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub struct InstanceClass {
+    pub id: u16,
+    pub class: String,
+}
+
+/// A random-access RGB-D dataset (file reader or generator).
+pub trait RgbdSource: Send {
+    fn name(&self) -> String;
+    fn intrinsics(&self) -> Intrinsics;
+    fn len(&self) -> usize;
+    fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+    /// Nominal frames per second (for pacing a live-like replay).
+    fn frame_rate(&self) -> f64;
+    fn frame(&mut self, index: usize) -> Result<RgbdFrame, DatasetError>;
+    /// Instance id → class name; empty when the dataset has no labels.
+    fn class_table(&self) -> Vec<InstanceClass>;
+}

@@ -1,0 +1,44 @@
+//! `metrics.json` of a run, computed from the files in the run directory so
+//! that `opengs run` and `opengs eval RUN_DIR` give the same numbers.
+
+use std::path::Path;
+
+use opengs_eval::{absolute_trajectory_error, read_tum_trajectory};
+use serde::{Deserialize, Serialize};
+
+/// Timestamps of our trajectory and ground truth come from the same frames.
+const MAX_DT: f64 = 0.005;
+
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+pub struct RunMetrics {
+    pub frames: usize,
+    /// ATE after rigid (no-scale) Umeyama alignment, METHOD §9.
+    pub ate_rmse_cm: Option<f64>,
+    pub ate_mean_cm: Option<f64>,
+    pub ate_max_cm: Option<f64>,
+}
+
+/// Computes the metrics of `run_dir` and writes `metrics.json`.
+pub fn evaluate_run(run_dir: &Path) -> anyhow::Result<RunMetrics> {
+    let traj_path = run_dir.join("trajectory.txt");
+    let estimated = read_tum_trajectory(&traj_path)?;
+    let gt_path = run_dir.join("groundtruth.txt");
+    let mut metrics = RunMetrics {
+        frames: estimated.len(),
+        ate_rmse_cm: None,
+        ate_mean_cm: None,
+        ate_max_cm: None,
+    };
+    if gt_path.exists() {
+        let gt = read_tum_trajectory(&gt_path)?;
+        let ate = absolute_trajectory_error(&estimated, &gt, MAX_DT)?;
+        metrics.ate_rmse_cm = Some(ate.rmse * 100.0);
+        metrics.ate_mean_cm = Some(ate.mean * 100.0);
+        metrics.ate_max_cm = Some(ate.max * 100.0);
+    }
+    std::fs::write(
+        run_dir.join("metrics.json"),
+        serde_json::to_string_pretty(&metrics)?,
+    )?;
+    Ok(metrics)
+}

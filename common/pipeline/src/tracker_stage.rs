@@ -1,0 +1,180 @@
+//! The tracker stage: frames in, a pose for every frame and keyframes out.
+
+use opengs_geometry::{pose_from_tum, pose_to_tum, Intrinsics};
+use opengs_ipc_schema::service::{FRAMES, KEYFRAMES, POSES};
+use opengs_ipc_schema::{
+    now_ns, FrameHeader, FrameView, KeyframeHeader, KeyframeParts, MessageKind, PoseHeader,
+    PoseStatus, Stamp,
+};
+use opengs_runtime::{
+    waitset, CallbackProgression, Inlet, Outlet, RunContext, TelemetrySink, WaitSetRunResult,
+};
+use opengs_tracking::{FrameTracker, TrackOutcome, TrackStatus, TrackerConfig};
+
+/// Options of the tracker stage.
+#[derive(clap::Args, Debug, Clone)]
+pub struct TrackerArgs {
+    /// Threads for registration.
+    #[arg(long, default_value_t = 2)]
+    pub threads: usize,
+    /// Start at the frame's ground-truth pose instead of the identity.
+    #[arg(long)]
+    pub gt_first_pose: bool,
+}
+
+fn status_of(s: TrackStatus) -> PoseStatus {
+    match s {
+        TrackStatus::Initial => PoseStatus::Initial,
+        TrackStatus::Tracked => PoseStatus::Tracked,
+        TrackStatus::TooFewPoints => PoseStatus::TooFewPoints,
+        TrackStatus::NotConverged => PoseStatus::NotConverged,
+        TrackStatus::NoDepth => PoseStatus::NoDepth,
+    }
+}
+
+struct TrackerStage {
+    tracker: Option<FrameTracker>,
+    pool: rayon::ThreadPool,
+    poses: Outlet<PoseHeader>,
+    keyframes: Outlet<KeyframeHeader>,
+    telemetry: TelemetrySink,
+    gt_first_pose: bool,
+}
+
+impl TrackerStage {
+    fn handle(&mut self, h: &FrameHeader, payload: &[u8]) -> anyhow::Result<()> {
+        let start = now_ns();
+        let view = match h.decode(payload) {
+            Ok(v) => v,
+            Err(e) => {
+                tracing::error!("frame #{} rejected: {e}", h.stamp.seq);
+                self.telemetry.dropped(&h.stamp);
+                return Ok(());
+            }
+        };
+        let [fx, fy, cx, cy] = h.intrinsics;
+        let k = Intrinsics::new(fx, fy, cx, cy, h.width, h.height);
+        let gt_first = self.gt_first_pose;
+        let tracker = self.tracker.get_or_insert_with(|| {
+            let mut t = FrameTracker::new(TrackerConfig::for_width(h.width));
+            if gt_first && h.has_gt() {
+                if let Ok(p) = pose_from_tum(&h.gt_pose) {
+                    t.set_first_pose(p);
+                }
+            }
+            t
+        });
+        let out = self
+            .pool
+            .install(|| tracker.track(view.depth, h.depth_scale as f64, &k));
+        if let Some(why) = &out.failure {
+            tracing::warn!("frame #{}: {:?} ({why})", h.stamp.seq, out.status);
+        }
+        let mut stamp = Stamp::derived(MessageKind::Pose, &h.stamp);
+        stamp.stage_start_ns = start;
+        let pose = PoseHeader {
+            stamp,
+            pose: pose_to_tum(&out.pose),
+            gt_pose: h.gt_pose,
+            has_gt: h.has_gt() as u32,
+            status: status_of(out.status) as u32,
+            is_keyframe: out.keyframe.is_some() as u32,
+            iterations: out.iterations as u32,
+            inliers: out.inliers as u32,
+            overlap: out.overlap.clamp(0.0, 1.0) as f32,
+        };
+        self.poses.send_header(pose)?;
+        if out.keyframe.is_some() {
+            self.send_keyframe(h, &view, &out, start)?;
+        }
+        self.telemetry.processed(&h.stamp, start, now_ns());
+        Ok(())
+    }
+
+    /// Keyframe for the mapper: source points and covariances in the world frame, plus the images.
+    fn send_keyframe(
+        &self,
+        h: &FrameHeader,
+        view: &FrameView,
+        out: &TrackOutcome,
+        start: u64,
+    ) -> anyhow::Result<()> {
+        let Some(cloud) = &out.source else {
+            return Ok(());
+        };
+        let world = cloud.transformed(&out.pose);
+        let points: Vec<[f32; 3]> = world
+            .points
+            .iter()
+            .map(|p| [p.x as f32, p.y as f32, p.z as f32])
+            .collect();
+        let covariances: Vec<[f32; 6]> = world
+            .covariances
+            .iter()
+            .map(|c| {
+                [
+                    c[(0, 0)],
+                    c[(0, 1)],
+                    c[(0, 2)],
+                    c[(1, 1)],
+                    c[(1, 2)],
+                    c[(2, 2)],
+                ]
+                .map(|v| v as f32)
+            })
+            .collect();
+        let mut stamp = Stamp::derived(MessageKind::Keyframe, &h.stamp);
+        stamp.stage_start_ns = start;
+        let header = KeyframeHeader::new(
+            stamp,
+            pose_to_tum(&out.pose),
+            h.intrinsics,
+            h.width,
+            h.height,
+            h.depth_scale,
+            points.len() as u32,
+            h.frame_index,
+        );
+        let parts = KeyframeParts {
+            points: &points,
+            covariances: &covariances,
+            depth: view.depth,
+            rgb: view.rgb,
+        };
+        self.keyframes
+            .send(header, |hd, buf| hd.encode(&parts, buf))?;
+        Ok(())
+    }
+}
+
+/// Runs the tracker stage until a termination signal.
+pub fn run_tracker(ctx: &RunContext, args: &TrackerArgs) -> anyhow::Result<()> {
+    let node = ctx.node("tracker")?;
+    let frames = Inlet::<FrameHeader>::new(ctx, &node, &FRAMES)?;
+    let mut stage = TrackerStage {
+        tracker: None,
+        pool: rayon::ThreadPoolBuilder::new()
+            .num_threads(args.threads.max(1))
+            .build()?,
+        poses: Outlet::new(ctx, &node, &POSES, 8)?,
+        keyframes: Outlet::new(ctx, &node, &KEYFRAMES, 640 * 480 * 5 + 12_288 * 36 + 256)?,
+        telemetry: TelemetrySink::new(ctx, &node, "tracker")?,
+        gt_first_pose: args.gt_first_pose,
+    };
+    let ws = waitset()?;
+    let _guard = ws
+        .attach_notification(frames.listener())
+        .map_err(|e| anyhow::anyhow!("WaitSet: {e:?}"))?;
+    stage.telemetry.ready();
+    loop {
+        match ws.wait_and_process_once(|_| CallbackProgression::Continue) {
+            Ok(WaitSetRunResult::TerminationRequest | WaitSetRunResult::Interrupt) => return Ok(()),
+            Err(e) => anyhow::bail!("WaitSet: {e:?}"),
+            Ok(_) => {}
+        }
+        frames.clear_wakeups();
+        while let Some(sample) = frames.receive()? {
+            stage.handle(sample.user_header(), sample.payload())?;
+        }
+    }
+}

@@ -1,0 +1,59 @@
+use opengs_gicp::{RegistrationConfig, Regularization, DEFAULT_NEIGHBOURS};
+
+/// Tracker settings; defaults are METHOD §7's TUM-size values.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TrackerConfig {
+    /// Depth sampling stride in pixels (5 TUM-size, 10 Replica-size).
+    pub stride: usize,
+    /// Neighbours per covariance (10).
+    pub neighbours: usize,
+    pub regularization: Regularization,
+    pub registration: RegistrationConfig,
+    /// A frame whose overlap with the target drops below this is a tracking keyframe (0.81 TUM, 0.7 Replica).
+    pub keyframe_overlap: f64,
+    /// A mapping keyframe at least every this many frames (10).
+    pub keyframe_every: u64,
+    /// Depth beyond this (m) is ignored.
+    pub max_depth: f64,
+    /// Fewer valid samples than this is a tracking failure.
+    pub min_points: usize,
+}
+
+impl Default for TrackerConfig {
+    fn default() -> Self {
+        Self::tum()
+    }
+}
+
+impl TrackerConfig {
+    pub fn tum() -> Self {
+        Self {
+            stride: 5,
+            neighbours: DEFAULT_NEIGHBOURS,
+            regularization: Regularization::NormalizedEllipse,
+            registration: RegistrationConfig::tum(),
+            keyframe_overlap: 0.81,
+            keyframe_every: 10,
+            max_depth: 5.0,
+            min_points: 200,
+        }
+    }
+
+    pub fn replica() -> Self {
+        Self {
+            stride: 10,
+            registration: RegistrationConfig::replica(),
+            keyframe_overlap: 0.7,
+            ..Self::tum()
+        }
+    }
+
+    /// TUM-size settings below 1000 px wide, Replica-size above.
+    pub fn for_width(width: u32) -> Self {
+        if width >= 1000 {
+            Self::replica()
+        } else {
+            Self::tum()
+        }
+    }
+}
