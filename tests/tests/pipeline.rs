@@ -260,3 +260,91 @@ fn ctrl_c_stops_the_run_and_keeps_outputs() {
         "stages left running"
     );
 }
+
+/// `(cpus allowed, nice)` of a live process, from /proc.
+fn affinity_and_nice(pid: u64) -> (String, i64) {
+    let status = std::fs::read_to_string(format!("/proc/{pid}/status")).expect("status");
+    let cpus = status
+        .lines()
+        .find_map(|l| l.strip_prefix("Cpus_allowed_list:"))
+        .map(|s| s.trim().to_string())
+        .expect("Cpus_allowed_list");
+    let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).expect("stat");
+    // Fields after the parenthesised command name; nice is field 19 overall.
+    let after = &stat[stat.rfind(')').expect("comm") + 2..];
+    let nice = after
+        .split_whitespace()
+        .nth(16)
+        .and_then(|v| v.parse().ok())
+        .expect("nice");
+    (cpus, nice)
+}
+
+#[test]
+fn edge_deploy_pins_and_nices_stages() {
+    if std::thread::available_parallelism().map_or(1, |n| n.get()) < 2 {
+        eprintln!("skipped: the edge deploy pins to cpus 0 and 1");
+        return;
+    }
+    let dir = tempfile::tempdir().expect("tmp");
+    let run_id = unique_run_id("edge");
+    let out = dir.path().join("run");
+    let mut run = Guard(
+        Command::new(binary("opengs"))
+            .args([
+                "run", "--quiet", "--deploy", "edge", "--run-id", &run_id, "--frames", "100000",
+            ])
+            .arg("--out")
+            .arg(&out)
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .expect("opengs run starts"),
+    );
+    let deadline = Instant::now() + Duration::from_secs(60);
+    let stages = loop {
+        assert!(Instant::now() < deadline, "run never got going");
+        if let Some(st) = ctl_status(&run_id) {
+            let stages = st["stages"].as_array().cloned().unwrap_or_default();
+            if stages
+                .iter()
+                .all(|s| s["pid"].is_u64() && s["processed"].as_u64().unwrap_or(0) > 0)
+            {
+                break stages;
+            }
+        }
+        std::thread::sleep(Duration::from_millis(100));
+    };
+    let pid = |name: &str| {
+        stages
+            .iter()
+            .find(|s| s["name"] == name)
+            .and_then(|s| s["pid"].as_u64())
+            .expect(name)
+    };
+    assert_eq!(affinity_and_nice(pid("tracker")), ("1".to_string(), 0));
+    assert_eq!(affinity_and_nice(pid("sensor")), ("0".to_string(), 5));
+    // `opengs ctl stop` ends the run cleanly.
+    let stop = Command::new(binary("opengs"))
+        .args(["ctl", "--run", &run_id, "stop"])
+        .output()
+        .expect("ctl stop");
+    assert!(
+        stop.status.success(),
+        "{}",
+        String::from_utf8_lossy(&stop.stderr)
+    );
+    let started = Instant::now();
+    while run.0.try_wait().expect("wait").is_none() {
+        assert!(
+            started.elapsed() < Duration::from_secs(20),
+            "run did not stop on `ctl stop`"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    assert!(out.join("trajectory.txt").exists());
+    assert_eq!(
+        opengs_runtime::leftover_files(&run_id),
+        Vec::<std::path::PathBuf>::new()
+    );
+}

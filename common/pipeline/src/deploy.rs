@@ -69,10 +69,10 @@ pub struct DeployFile {
 
 #[derive(Debug, thiserror::Error)]
 pub enum DeployError {
-    #[error("deploy file {path}: {source}")]
+    #[error("deploy file {path}: {cause}")]
     Read {
         path: PathBuf,
-        source: std::io::Error,
+        cause: std::io::Error,
     },
     #[error("deploy file {path}: {message}")]
     Parse { path: PathBuf, message: String },
@@ -93,7 +93,7 @@ impl DeployFile {
             Some("edge") => EDGE.to_string(),
             _ => std::fs::read_to_string(path).map_err(|e| DeployError::Read {
                 path: path.to_path_buf(),
-                source: e,
+                cause: e,
             })?,
         };
         Self::parse(&text, path)

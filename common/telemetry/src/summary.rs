@@ -34,15 +34,12 @@ pub struct LatencyReport {
 
 #[derive(Debug, thiserror::Error)]
 pub enum ReportError {
-    #[error("{path}: {source}")]
-    Io {
-        path: String,
-        source: std::io::Error,
-    },
-    #[error("{path}: not a latency report: {source}")]
+    #[error("{path}: {cause}")]
+    Io { path: String, cause: std::io::Error },
+    #[error("{path}: not a latency report: {cause}")]
     Parse {
         path: String,
-        source: serde_json::Error,
+        cause: serde_json::Error,
     },
 }
 
@@ -50,22 +47,22 @@ impl LatencyReport {
     pub fn write(&self, path: &Path) -> Result<(), ReportError> {
         let text = serde_json::to_string_pretty(self).map_err(|e| ReportError::Parse {
             path: path.display().to_string(),
-            source: e,
+            cause: e,
         })?;
         std::fs::write(path, text).map_err(|e| ReportError::Io {
             path: path.display().to_string(),
-            source: e,
+            cause: e,
         })
     }
 
     pub fn read(path: &Path) -> Result<Self, ReportError> {
         let text = std::fs::read_to_string(path).map_err(|e| ReportError::Io {
             path: path.display().to_string(),
-            source: e,
+            cause: e,
         })?;
         serde_json::from_str(&text).map_err(|e| ReportError::Parse {
             path: path.display().to_string(),
-            source: e,
+            cause: e,
         })
     }
 

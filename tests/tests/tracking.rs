@@ -1,0 +1,78 @@
+//! End-to-end tracking: `opengs run` on the synthetic room along a real TUM trajectory.
+
+use std::path::PathBuf;
+use std::process::Command;
+
+use opengs_e2e::binary;
+
+fn fr1_xyz() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../../shared/data/tum_trajectories/freiburg1_xyz-groundtruth.txt")
+}
+
+/// Runs the pipeline and returns metrics.json.
+fn run(frames: usize, noise: bool) -> serde_json::Value {
+    let dir = tempfile::tempdir().expect("tmp");
+    let out = dir.path().join("run");
+    let mut cmd = Command::new(binary("opengs"));
+    cmd.args([
+        "run",
+        "--quiet",
+        "--frames",
+        &frames.to_string(),
+        "--trajectory",
+    ])
+    .arg(fr1_xyz())
+    .arg("--out")
+    .arg(&out)
+    .args([
+        "--run-id",
+        &format!("t{}-track{}", std::process::id(), noise as u8),
+    ]);
+    if noise {
+        cmd.arg("--noise");
+    }
+    let output = cmd.output().expect("opengs run");
+    let stdout = String::from_utf8_lossy(&output.stdout);
+    assert!(
+        output.status.success(),
+        "{stdout}\n{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    assert!(stdout.contains("ATE"), "{stdout}");
+    let metrics: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(out.join("metrics.json")).expect("metrics.json"),
+    )
+    .expect("json");
+    // `opengs eval` recomputes the same numbers from the files.
+    let eval = Command::new(binary("opengs"))
+        .arg("eval")
+        .arg(&out)
+        .output()
+        .expect("eval");
+    assert!(eval.status.success());
+    let again: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(out.join("metrics.json")).expect("metrics.json"),
+    )
+    .expect("json");
+    assert_eq!(metrics, again);
+    // The trajectory has one TUM line per frame.
+    let traj = std::fs::read_to_string(out.join("trajectory.txt")).expect("trajectory");
+    assert_eq!(traj.lines().filter(|l| !l.starts_with('#')).count(), frames);
+    metrics
+}
+
+#[test]
+fn noise_free_run_has_sub_centimetre_ate() {
+    let m = run(120, false);
+    let rmse = m["ate_rmse_cm"].as_f64().expect("ate_rmse_cm");
+    assert!(rmse < 1.0, "ATE RMSE {rmse} cm");
+    assert!(m["ate_mean_cm"].as_f64().expect("mean") <= rmse);
+}
+
+#[test]
+fn kinect_noise_run_stays_under_three_centimetres() {
+    let m = run(120, true);
+    let rmse = m["ate_rmse_cm"].as_f64().expect("ate_rmse_cm");
+    assert!(rmse < 3.0, "ATE RMSE {rmse} cm");
+}
