@@ -74,7 +74,7 @@ pub(crate) struct PayloadReader<'a> {
 
 impl<'a> PayloadReader<'a> {
     pub(crate) fn new(buf: &'a [u8]) -> Result<Self, SchemaError> {
-        if buf.as_ptr() as usize % ALIGN != 0 && !buf.is_empty() {
+        if !(buf.as_ptr() as usize).is_multiple_of(ALIGN) && !buf.is_empty() {
             return Err(SchemaError::Alignment(ALIGN));
         }
         Ok(Self { buf, pos: 0 })

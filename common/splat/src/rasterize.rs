@@ -2,14 +2,16 @@
 //! silhouette, with GS Voting labels, top-K and visibility in the same pass.
 //!
 //! Each tile walks its depth-sorted list Gaussian by Gaussian and updates only the rows
-//! where the Gaussian can reach α ≥ 1/255 (exact: other pixels would skip it anyway), in
-//! fixed 16-lane row loops that vectorise. Voting keeps 3 (label, sum) slots per pixel in
-//! the same lane loop (pixels meeting more labels are replayed exactly at the end of the
-//! tile). For top-K each touched row appends its 16 weights to a per-row log; at the end of
-//! the tile every pixel reads its contributions back in depth order and keeps the K
-//! heaviest. Bands of 16 image rows run in parallel (rayon); one kernel is compiled per
-//! combination of requested outputs, so unrequested outputs cost nothing.
+//! where the Gaussian can reach α ≥ 1/255 (exact: other pixels would skip it anyway), one
+//! 16-lane row at a time (one AVX-512 register, two AVX2 ones). When top-K is asked for,
+//! every contribution is appended to its pixel's slot column in the tile scratch (ids and
+//! weights, front to back, no sorting); at the end of the tile each pixel votes its label
+//! from that list and copies it (or, past K, its K heaviest) out. Labels without top-K vote
+//! in the lane loop instead (3 (label, sum) slots per pixel; pixels meeting more labels are
+//! replayed exactly at the end of the tile). Bands of 16 image rows run in parallel
+//! (rayon); one kernel is compiled per combination of requested outputs and per SIMD level.
 
+use std::cell::RefCell;
 use std::collections::BTreeMap;
 use std::sync::atomic::{AtomicBool, Ordering};
 
@@ -27,6 +29,10 @@ use crate::voting::vote;
 
 const T: usize = TILE_SIZE as usize;
 
+/// Contributions per pixel kept in the tile scratch; a pixel with more is replayed exactly
+/// at the end of its tile (rare: opaque surfaces saturate long before).
+const CAP: usize = 128;
+
 /// Rasterizes projected, binned Gaussians. `labels` are the map's labels (for voting).
 pub fn rasterize(
     projected: &Projected,
@@ -40,10 +46,13 @@ pub fn rasterize(
     out
 }
 
-/// Resizes `v` to `n` elements of `value`, keeping its allocation.
-fn reset<T: Clone>(v: &mut Vec<T>, n: usize, value: T) {
-    v.clear();
-    v.resize(n, value);
+/// Sizes `v` to `n` elements, keeping its allocation. Contents are not reset when the size
+/// already fits: the pass writes every pixel, and a memset of ~10 MB per frame is wasted.
+fn fit<T: Clone>(v: &mut Vec<T>, n: usize, value: T) {
+    if v.len() != n {
+        v.clear();
+        v.resize(n, value);
+    }
 }
 
 /// [`rasterize`] into an existing output, reusing its buffers: repeated renders then touch
@@ -65,15 +74,15 @@ pub fn rasterize_into(
         .map(|k| k.min(u16::MAX as usize));
     out.width = grid.width;
     out.height = grid.height;
-    reset(&mut out.color, n, [0.0; 3]);
-    reset(&mut out.depth, n, 0.0);
-    reset(&mut out.silhouette, n, 0.0);
-    reset(&mut out.final_transmittance, n, 1.0);
-    reset(&mut out.n_contrib, n, 0);
+    fit(&mut out.color, n, [0.0; 3]);
+    fit(&mut out.depth, n, 0.0);
+    fit(&mut out.silhouette, n, 0.0);
+    fit(&mut out.final_transmittance, n, 1.0);
+    fit(&mut out.n_contrib, n, 0);
     out.labels = match (request.labels, out.labels.take()) {
         (true, old) => {
             let mut v = old.unwrap_or_default();
-            reset(&mut v, n, 0);
+            fit(&mut v, n, 0);
             Some(v)
         }
         (false, _) => None,
@@ -84,8 +93,8 @@ pub fn rasterize_into(
             t.k = k;
             t.width = grid.width;
             t.height = grid.height;
-            reset(&mut t.start, n, 0);
-            reset(&mut t.count, n, 0);
+            fit(&mut t.start, n, 0);
+            fit(&mut t.count, n, 0);
             t.bands
                 .resize_with(grid.tiles_y as usize, TopKBand::default);
             for b in &mut t.bands {
@@ -108,8 +117,11 @@ pub fn rasterize_into(
         grid,
         labels,
         top_k,
+        vote: request.labels,
         sort_top_k: request.sort_top_k,
         visible: visible.as_deref(),
+        simd: simd_level(),
+        skip_push: std::env::var("EXP").as_deref() == Ok("2"),
     };
 
     let band_len = T * w;
@@ -142,32 +154,92 @@ pub fn rasterize_into(
         })
         .collect();
 
-    let (log, vote) = (top_k.is_some(), request.labels);
-    bands
-        .into_par_iter()
-        .for_each_init(Scratch::new, |scratch, mut band| {
+    // Lists when top-K is asked for (labels then vote from them), lane voting for labels alone.
+    let lists = top_k.is_some();
+    let lane_vote = request.labels && !lists;
+    bands.into_par_iter().for_each(|mut band| {
+        SCRATCH.with(|cell| {
+            let mut guard = cell.borrow_mut();
+            let scratch = guard.get_or_insert_with(Scratch::new);
             for tx in 0..grid.tiles_x as usize {
-                let tile = band.band * grid.tiles_x as usize + tx;
                 // One monomorphised kernel per combination, so unrequested outputs cost nothing.
-                match (log, vote) {
-                    (false, false) => run_tile::<false, false>(&ctx, scratch, tile),
-                    (false, true) => run_tile::<false, true>(&ctx, scratch, tile),
-                    (true, false) => run_tile::<true, false>(&ctx, scratch, tile),
-                    (true, true) => run_tile::<true, true>(&ctx, scratch, tile),
+                match (lists, lane_vote) {
+                    (false, false) => run_tile::<false, false>(&ctx, scratch, &mut band, tx),
+                    (false, true) => run_tile::<false, true>(&ctx, scratch, &mut band, tx),
+                    (true, _) => run_tile::<true, false>(&ctx, scratch, &mut band, tx),
                 }
-                write_tile(&ctx, scratch, &mut band, tx, tile);
             }
-        });
+        })
+    });
 
     if let Some(vis) = visible {
-        let mut counts = BTreeMap::new();
-        for (i, v) in vis.iter().enumerate() {
-            if v.load(Ordering::Relaxed) {
-                *counts.entry(labels[i]).or_insert(0u32) += 1;
-            }
-        }
-        out.visible_per_label = Some(counts);
+        out.visible_per_label = Some(count_visible(&vis, labels));
     }
+}
+
+/// label → number of visible Gaussians; dense counting for the usual small label ids.
+fn count_visible(vis: &[AtomicBool], labels: &[u32]) -> BTreeMap<u32, u32> {
+    const DENSE: usize = 1 << 16;
+    let mut dense: Vec<u32> = Vec::new();
+    let mut sparse = BTreeMap::new();
+    for (v, &label) in vis.iter().zip(labels) {
+        if !v.load(Ordering::Relaxed) {
+            continue;
+        }
+        let l = label as usize;
+        if l < DENSE {
+            if l >= dense.len() {
+                dense.resize(l + 1, 0);
+            }
+            dense[l] += 1;
+        } else {
+            *sparse.entry(label).or_insert(0u32) += 1;
+        }
+    }
+    for (l, &c) in dense.iter().enumerate() {
+        if c > 0 {
+            sparse.insert(l as u32, c);
+        }
+    }
+    sparse
+}
+
+/// Which instruction set the tile kernels use.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Simd {
+    Portable,
+    #[cfg(target_arch = "x86_64")]
+    Avx2,
+    #[cfg(target_arch = "x86_64")]
+    Avx512,
+}
+
+/// Tests set this to exercise the portable kernels on any machine.
+static FORCE_PORTABLE: AtomicBool = AtomicBool::new(false);
+
+/// Forces (or stops forcing) the portable kernels; results are bit-identical either way.
+#[cfg(test)]
+pub(crate) fn force_portable(on: bool) {
+    FORCE_PORTABLE.store(on, Ordering::Relaxed);
+}
+
+fn simd_level() -> Simd {
+    if FORCE_PORTABLE.load(Ordering::Relaxed) {
+        return Simd::Portable;
+    }
+    #[cfg(target_arch = "x86_64")]
+    {
+        if std::arch::is_x86_feature_detected!("avx512f")
+            && std::arch::is_x86_feature_detected!("avx512bw")
+            && std::arch::is_x86_feature_detected!("avx512vl")
+        {
+            return Simd::Avx512;
+        }
+        if std::arch::is_x86_feature_detected!("avx2") {
+            return Simd::Avx2;
+        }
+    }
+    Simd::Portable
 }
 
 struct Ctx<'a> {
@@ -176,8 +248,11 @@ struct Ctx<'a> {
     grid: &'a TileGrid,
     labels: &'a [u32],
     top_k: Option<usize>,
+    vote: bool,
     sort_top_k: bool,
     visible: Option<&'a [AtomicBool]>,
+    simd: Simd,
+    skip_push: bool,
 }
 
 /// Output slices of one band of 16 image rows.
@@ -205,8 +280,10 @@ struct TileState {
     s: [[f32; T]; T],
     last: [[u32; T]; T],
     row_live: [u32; T],
-    /// GS Voting: VOTE_SLOTS (label, weight sum) slots per pixel, filled in order; a pixel
-    /// meeting more labels is flagged and re-walked exactly at the end of the tile.
+    /// Contributions per pixel so far (lists mode).
+    count: [[u32; T]; T],
+    /// GS Voting without lists: VOTE_SLOTS (label, weight sum) slots per pixel, filled in
+    /// order; a pixel meeting more labels is flagged and re-walked exactly at the end.
     vote_label: [[[u32; T]; T]; VOTE_SLOTS],
     vote_sum: [[[f32; T]; T]; VOTE_SLOTS],
     vote_overflow: [[u32; T]; T],
@@ -215,26 +292,39 @@ struct TileState {
 /// Label slots per pixel held in vector registers (few labels meet at a pixel).
 const VOTE_SLOTS: usize = 3;
 
-/// Weights each Gaussian left on one tile row, in depth order (for top-K).
-#[derive(Default)]
-struct RowLog {
-    ranks: Vec<u32>,
-    weights: Vec<[f32; T]>,
-}
+/// Per-pixel contribution lists of one tile as `[row][slot][lane]`: the 16 pixels of a row
+/// append to neighbouring words, and one pixel's list is read from consecutive cache lines
+/// (slot-major over the whole tile put a pixel's slots 1 KB apart, all in 4 L1 sets).
+type Slots<V> = [[[V; T]; CAP]; T];
 
-#[derive(Default)]
 struct Scratch {
-    state: Option<Box<TileState>>,
-    logs: Vec<RowLog>,
+    st: Box<TileState>,
+    ids: Box<Slots<u32>>,
+    ws: Box<Slots<f32>>,
     keys: Vec<u64>,
     votes: Vec<(u32, f32)>,
     replay: Vec<(u32, f32)>,
+    tile_labels: Vec<u32>,
+}
+
+thread_local! {
+    /// Per-thread tile scratch, kept across frames (no allocation or page faults per render).
+    static SCRATCH: RefCell<Option<Scratch>> = const { RefCell::new(None) };
+}
+
+/// A zeroed boxed value built on the heap (the slot arrays are too big for the stack).
+fn boxed_zeroed<V: Copy + Default>() -> Box<Slots<V>> {
+    let v: Vec<[[V; T]; CAP]> = vec![[[V::default(); T]; CAP]; T];
+    match v.into_boxed_slice().try_into() {
+        Ok(b) => b,
+        Err(_) => unreachable!("the vector has T elements"),
+    }
 }
 
 impl Scratch {
     fn new() -> Self {
         Self {
-            state: Some(Box::new(TileState {
+            st: Box::new(TileState {
                 t: [[1.0; T]; T],
                 r: [[0.0; T]; T],
                 g: [[0.0; T]; T],
@@ -243,12 +333,17 @@ impl Scratch {
                 s: [[0.0; T]; T],
                 last: [[0; T]; T],
                 row_live: [0; T],
+                count: [[0; T]; T],
                 vote_label: [[[0; T]; T]; VOTE_SLOTS],
                 vote_sum: [[[0.0; T]; T]; VOTE_SLOTS],
                 vote_overflow: [[0; T]; T],
-            })),
-            logs: (0..T).map(|_| RowLog::default()).collect(),
-            ..Default::default()
+            }),
+            ids: boxed_zeroed::<u32>(),
+            ws: boxed_zeroed::<f32>(),
+            keys: Vec::new(),
+            votes: Vec::new(),
+            replay: Vec::new(),
+            tile_labels: Vec::new(),
         }
     }
 }
@@ -261,43 +356,77 @@ struct LaneGaussian {
     color: [f32; 3],
     depth: f32,
     rank1: u32,
-    label: u32,
 }
 
-fn run_tile<const LOG: bool, const VOTE: bool>(ctx: &Ctx, scratch: &mut Scratch, tile: usize) {
-    #[cfg(target_arch = "x86_64")]
-    {
-        if std::arch::is_x86_feature_detected!("avx2") {
-            // SAFETY: the CPU supports AVX2 (checked just above).
-            unsafe { tile_kernel_avx2::<LOG, VOTE>(ctx, scratch, tile) };
-            return;
-        }
+/// Rasterizes tile `tx` of `band` and writes it out, with the best kernel for this CPU.
+fn run_tile<const LISTS: bool, const VOTE: bool>(
+    ctx: &Ctx,
+    scratch: &mut Scratch,
+    band: &mut BandOut,
+    tx: usize,
+) {
+    match ctx.simd {
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: `simd_level` chose Avx512 only after detecting avx512f/bw/vl on this CPU.
+        Simd::Avx512 => unsafe { tile_avx512::<LISTS, VOTE>(ctx, scratch, band, tx) },
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: `simd_level` chose Avx2 only after detecting avx2 on this CPU.
+        Simd::Avx2 => unsafe { tile_avx2::<LISTS, VOTE>(ctx, scratch, band, tx) },
+        Simd::Portable => tile::<LISTS, VOTE>(ctx, scratch, band, tx),
     }
-    tile_kernel::<LOG, VOTE>(ctx, scratch, tile);
 }
 
-/// The same kernel compiled for AVX2 (wider lane loops, identical IEEE results: no FMA).
+/// The tile compiled for AVX-512 (one 16-lane row per register, mask registers). No FMA is
+/// enabled, so results are bit-identical to the portable build and the reference renderer.
+///
+/// # Safety
+/// The caller must ensure the CPU supports AVX-512 F, BW and VL.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx512bw,avx512vl,avx2")]
+unsafe fn tile_avx512<const LISTS: bool, const VOTE: bool>(
+    ctx: &Ctx,
+    scratch: &mut Scratch,
+    band: &mut BandOut,
+    tx: usize,
+) {
+    tile::<LISTS, VOTE>(ctx, scratch, band, tx)
+}
+
+/// The tile compiled for AVX2 (bit-identical results: no FMA).
 ///
 /// # Safety
 /// The caller must ensure the CPU supports AVX2.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
-unsafe fn tile_kernel_avx2<const LOG: bool, const VOTE: bool>(
+unsafe fn tile_avx2<const LISTS: bool, const VOTE: bool>(
     ctx: &Ctx,
     scratch: &mut Scratch,
-    tile: usize,
+    band: &mut BandOut,
+    tx: usize,
 ) {
-    tile_kernel::<LOG, VOTE>(ctx, scratch, tile)
+    tile::<LISTS, VOTE>(ctx, scratch, band, tx)
 }
 
 #[inline(always)]
-fn tile_kernel<const LOG: bool, const VOTE: bool>(ctx: &Ctx, scratch: &mut Scratch, tile: usize) {
+fn tile<const LISTS: bool, const VOTE: bool>(
+    ctx: &Ctx,
+    scratch: &mut Scratch,
+    band: &mut BandOut,
+    tx: usize,
+) {
+    let t = band.band * ctx.grid.tiles_x as usize + tx;
+    tile_kernel::<LISTS, VOTE>(ctx, scratch, t);
+    write_tile::<LISTS>(ctx, scratch, band, tx, t);
+}
+
+#[inline(always)]
+fn tile_kernel<const LISTS: bool, const VOTE: bool>(ctx: &Ctx, scratch: &mut Scratch, tile: usize) {
     let grid = ctx.grid;
     let tx0 = (tile % grid.tiles_x as usize) as u32 * TILE_SIZE;
     let ty0 = (tile / grid.tiles_x as usize) as u32 * TILE_SIZE;
     let cols = (grid.width - tx0).min(TILE_SIZE) as usize;
     let rows = (grid.height - ty0).min(TILE_SIZE) as usize;
-    let st = scratch.state.as_deref_mut().expect("scratch state");
+    let st = &mut *scratch.st;
     // Pixels outside the image start "done".
     for y in 0..T {
         for x in 0..T {
@@ -309,16 +438,13 @@ fn tile_kernel<const LOG: bool, const VOTE: bool>(ctx: &Ctx, scratch: &mut Scrat
         *a = [[0.0; T]; T];
     }
     st.last = [[0; T]; T];
+    if LISTS {
+        st.count = [[0; T]; T];
+    }
     if VOTE {
         st.vote_label = [[[0; T]; T]; VOTE_SLOTS];
         st.vote_sum = [[[0.0; T]; T]; VOTE_SLOTS];
         st.vote_overflow = [[0; T]; T];
-    }
-    if LOG {
-        for log in &mut scratch.logs {
-            log.ranks.clear();
-            log.weights.clear();
-        }
     }
     let mut live = (rows * cols) as u32;
     let lane_x: [f32; T] = std::array::from_fn(|i| (tx0 + i as u32) as f32);
@@ -337,8 +463,8 @@ fn tile_kernel<const LOG: bool, const VOTE: bool>(ctx: &Ctx, scratch: &mut Scrat
             color: p.colors[gi],
             depth: p.depths[gi],
             rank1: rank as u32 + 1,
-            label: if VOTE { ctx.labels[gi] } else { 0 },
         };
+        let label = if VOTE { ctx.labels[gi] } else { 0 };
         let e = p.ellipses[gi];
         let [a, b, c] = g.conic;
         let disc = b * b - a * c;
@@ -363,33 +489,34 @@ fn tile_kernel<const LOG: bool, const VOTE: bool>(ctx: &Ctx, scratch: &mut Scrat
                 continue;
             }
             let sq = root.sqrt();
-            // Conservative by 0.01 px: the lane loop applies the exact per-pixel tests.
+            // Conservative by 0.01 px: pixels outside fail the exact per-pixel tests anyway.
             let x_lo = (mx - (-b * dy + sq) * inv_a - 0.01).ceil() - tx0 as f32;
             let x_hi = (mx - (-b * dy - sq) * inv_a + 0.01).floor() - tx0 as f32;
             if x_hi < 0.0 || x_lo > (T - 1) as f32 || x_hi < x_lo {
                 continue;
             }
-            let x_lo = x_lo.max(0.0) as usize;
-            let x_hi = x_hi.min((T - 1) as f32) as usize;
             let mut w = [0.0f32; T];
-            let mut done_now = 0u32;
-            let mut n_contrib = 0u32;
-            // Both halves always: two independent dependency chains beat skipping one.
-            for half in 0..T / H {
-                let (d, n) = blend_lanes::<VOTE>(&g, dy, &lane_x, x_lo, x_hi, st, ly, half, &mut w);
-                done_now += d;
-                n_contrib += n;
-            }
+            let (mask, done_now) = blend_row(&g, dy, &lane_x, st, ly, &mut w);
             st.row_live[ly] -= done_now;
             live -= done_now;
-            if LOG && n_contrib > 0 {
-                let log = &mut scratch.logs[ly];
-                log.ranks.push(rank as u32);
-                log.weights.push(w);
+            if VOTE && label != 0 {
+                vote_lanes(label, &w, st, ly);
             }
-            contributed += n_contrib;
+            if LISTS && !ctx.skip_push {
+                let r = rank as u32;
+                push_row(
+                    mask,
+                    r,
+                    &w,
+                    ly,
+                    &mut st.count,
+                    &mut scratch.ids,
+                    &mut scratch.ws,
+                );
+            }
+            contributed |= mask;
         }
-        if contributed > 0 {
+        if contributed != 0 {
             if let Some(v) = ctx.visible {
                 v[gi].store(true, Ordering::Relaxed);
             }
@@ -397,49 +524,29 @@ fn tile_kernel<const LOG: bool, const VOTE: bool>(ctx: &Ctx, scratch: &mut Scrat
     }
 }
 
-/// Lanes per vector block (one AVX2 register).
-const H: usize = 8;
-
+/// Composites one Gaussian over the 16 pixels of tile row `ly`. Writes each lane's weight
+/// α·T (0 where it did not contribute) into `w`; returns (bit mask of contributing lanes,
+/// number of pixels that became done).
 #[inline(always)]
-fn lanes8<V>(a: &mut [V; T], o: usize) -> &mut [V; H] {
-    (&mut a[o..o + H]).try_into().expect("8 lanes")
-}
-
-/// Composites one Gaussian over lanes x_lo..=x_hi within half `half` of tile row `ly`.
-/// Writes each lane's weight α·T (0 where it did not contribute) into `w`; returns
-/// (pixels that became done, pixels it contributed to).
-#[inline(always)]
-#[allow(clippy::too_many_arguments)]
-fn blend_lanes<const VOTE: bool>(
+fn blend_row(
     g: &LaneGaussian,
     dy: f32,
     lane_x: &[f32; T],
-    x_lo: usize,
-    x_hi: usize,
     st: &mut TileState,
     ly: usize,
-    half: usize,
     w: &mut [f32; T],
 ) -> (u32, u32) {
-    let o = half * H;
-    let t = lanes8(&mut st.t[ly], o);
-    let (r, gr, b) = (
-        lanes8(&mut st.r[ly], o),
-        lanes8(&mut st.g[ly], o),
-        lanes8(&mut st.b[ly], o),
-    );
-    let (d, s) = (lanes8(&mut st.d[ly], o), lanes8(&mut st.s[ly], o));
-    let last = lanes8(&mut st.last[ly], o);
-    let wl = lanes8(w, o);
-    let lx: &[f32; H] = lane_x[o..o + H].try_into().expect("8 lanes");
+    let t = &mut st.t[ly];
+    let (r, gr, b) = (&mut st.r[ly], &mut st.g[ly], &mut st.b[ly]);
+    let (d, s) = (&mut st.d[ly], &mut st.s[ly]);
+    let last = &mut st.last[ly];
+    let mut mask = 0u32;
     let mut newly_done = 0u32;
-    let mut contributed = 0u32;
-    for i in 0..H {
-        let dx = g.mean_x - lx[i];
+    for i in 0..T {
+        let dx = g.mean_x - lane_x[i];
         let power = gaussian_power(g.conic, dx, dy);
         let alpha = alpha_of(g.opacity, power);
-        let in_row = (o + i >= x_lo) & (o + i <= x_hi);
-        let valid = in_row & (power <= 0.0) & (alpha >= MIN_ALPHA);
+        let valid = (power <= 0.0) & (alpha >= MIN_ALPHA);
         let ti = t[i];
         let test_t = ti * (1.0 - alpha);
         // ti < 0 (done) makes test_t < 0, so done pixels never contribute again.
@@ -460,24 +567,45 @@ fn blend_lanes<const VOTE: bool>(
         };
         last[i] = if contrib { g.rank1 } else { last[i] };
         newly_done += done_now as u32;
-        contributed += contrib as u32;
-        wl[i] = wi;
+        mask |= (contrib as u32) << i;
+        w[i] = wi;
     }
-    if VOTE && g.label != 0 {
-        vote_lanes(g.label, wl, st, ly, o);
+    (mask, newly_done)
+}
+
+/// Appends (tile rank, weight) to the list of every pixel in `mask` on tile row `ly`.
+/// A pixel past CAP keeps counting (and overwrites its last slot); it is replayed later.
+#[inline(always)]
+fn push_row(
+    mut mask: u32,
+    rank: u32,
+    w: &[f32; T],
+    ly: usize,
+    count: &mut [[u32; T]; T],
+    ids: &mut Slots<u32>,
+    ws: &mut Slots<f32>,
+) {
+    let count = &mut count[ly];
+    while mask != 0 {
+        let i = mask.trailing_zeros() as usize & (T - 1);
+        mask &= mask - 1;
+        let n = count[i];
+        let j = (n as usize).min(CAP - 1);
+        ids[ly][j][i] = rank;
+        ws[ly][j][i] = w[i];
+        count[i] = n + 1;
     }
-    (newly_done, contributed)
 }
 
 /// Adds this Gaussian's weights to its label's slot in every lane (branch-free): the first
 /// slot holding the label or still empty takes it; if none, the pixel is flagged.
 #[inline(always)]
-fn vote_lanes(label: u32, w: &[f32; H], st: &mut TileState, ly: usize, o: usize) {
-    let mut pending = [true; H];
+fn vote_lanes(label: u32, w: &[f32; T], st: &mut TileState, ly: usize) {
+    let mut pending = [true; T];
     for slot in 0..VOTE_SLOTS {
-        let l = lanes8(&mut st.vote_label[slot][ly], o);
-        let s = lanes8(&mut st.vote_sum[slot][ly], o);
-        for i in 0..H {
+        let l = &mut st.vote_label[slot][ly];
+        let s = &mut st.vote_sum[slot][ly];
+        for i in 0..T {
             let c = w[i] > 0.0;
             let (same, empty) = (l[i] == label, l[i] == 0);
             let take = c & pending[i] & (same | empty);
@@ -487,14 +615,14 @@ fn vote_lanes(label: u32, w: &[f32; H], st: &mut TileState, ly: usize, o: usize)
             pending[i] &= !(same | empty);
         }
     }
-    let ov = lanes8(&mut st.vote_overflow[ly], o);
-    for i in 0..H {
+    let ov = &mut st.vote_overflow[ly];
+    for i in 0..T {
         ov[i] |= ((w[i] > 0.0) & pending[i]) as u32;
     }
 }
 
 /// Weights (tile rank, α·T) of one pixel's contributions, front to back: the kernel's
-/// arithmetic replayed for a single pixel (vote-slot overflow, on-demand top-K).
+/// arithmetic replayed for a single pixel (list / vote-slot overflow, on-demand top-K).
 pub(crate) fn replay_pixel(
     p: &Projected,
     list: &[u32],
@@ -524,15 +652,21 @@ pub(crate) fn replay_pixel(
     }
 }
 
-/// Copies a finished tile into the band's images, and resolves labels (vote slots) and
-/// top-K (row logs).
-fn write_tile(ctx: &Ctx, scratch: &mut Scratch, band: &mut BandOut, tx: usize, tile: usize) {
+/// Copies a finished tile into the band's images, and resolves labels and top-K.
+#[inline(always)]
+fn write_tile<const LISTS: bool>(
+    ctx: &Ctx,
+    scratch: &mut Scratch,
+    band: &mut BandOut,
+    tx: usize,
+    tile: usize,
+) {
     let grid = ctx.grid;
     let w = grid.width as usize;
     let x0 = tx * T;
     let cols = (w - x0).min(T);
     let rows = band.color.len() / w;
-    let st = scratch.state.as_deref().expect("scratch state");
+    let st = &*scratch.st;
     for y in 0..rows {
         let o = y * w + x0;
         for x in 0..cols {
@@ -546,6 +680,13 @@ fn write_tile(ctx: &Ctx, scratch: &mut Scratch, band: &mut BandOut, tx: usize, t
         band.n_contrib[o..o + cols].copy_from_slice(&st.last[y][..cols]);
     }
     let list = ctx.bins.tile(tile);
+    if LISTS {
+        if std::env::var("EXP").as_deref() == Ok("1") {
+            return;
+        }
+        resolve_lists(ctx, scratch, band, x0, rows, cols, list);
+        return;
+    }
     if let Some(labels) = band.labels.as_mut() {
         for y in 0..rows {
             for x in 0..cols {
@@ -571,140 +712,197 @@ fn write_tile(ctx: &Ctx, scratch: &mut Scratch, band: &mut BandOut, tx: usize, t
             }
         }
     }
-    if let (Some(k), Some(start), Some(count), Some(store)) = (
-        ctx.top_k,
-        band.topk_start.as_mut(),
-        band.topk_count.as_mut(),
-        band.topk_band.as_mut(),
-    ) {
-        let ctx_rows = TopKRows {
-            list,
-            logs: &scratch.logs,
-            last: &st.last,
-            rows,
-            cols,
-            k,
-            sort: ctx.sort_top_k,
-        };
-        let mut sink = TopKSink {
-            start,
-            count,
-            store,
-            width: w,
-            x0,
-        };
-        resolve_top_k(&ctx_rows, &mut sink, &mut scratch.keys);
+}
+
+/// Label slots of the list vote before it falls back to the general [`vote`].
+const LIST_VOTE_SLOTS: usize = 8;
+
+/// GS Voting over one pixel's `n` contributions `at(j)` = (tile rank, weight), front to
+/// back: the same sums, in the same order, as [`vote`] and the reference, so the same winner.
+#[inline(never)]
+fn vote_ranks(
+    n: usize,
+    at: impl Fn(usize) -> (u32, f32),
+    tile_labels: &[u32],
+    votes: &mut Vec<(u32, f32)>,
+) -> u32 {
+    let mut lab = [0u32; LIST_VOTE_SLOTS];
+    let mut sum = [0.0f32; LIST_VOTE_SLOTS];
+    let mut used = 0usize;
+    // The running label's sum lives in a register (a store/load per entry would chain
+    // through store forwarding); it is written back when the label changes.
+    let mut cur = 0usize;
+    let mut cur_label = 0u32;
+    let mut acc = 0.0f32;
+    for j in 0..n {
+        let (r, wt) = at(j);
+        let l = tile_labels[r as usize];
+        if l == 0 {
+            continue;
+        }
+        if l != cur_label {
+            if cur_label != 0 {
+                sum[cur] = acc;
+            }
+            cur_label = l;
+            cur = lab[..used].iter().position(|&x| x == l).unwrap_or(used);
+            if cur == used {
+                if used == LIST_VOTE_SLOTS {
+                    let it = (0..n).map(|j| {
+                        let (r, wt) = at(j);
+                        (tile_labels[r as usize], wt)
+                    });
+                    return vote(it, votes);
+                }
+                lab[used] = l;
+                sum[used] = 0.0;
+                used += 1;
+            }
+            cur &= LIST_VOTE_SLOTS - 1;
+            acc = sum[cur];
+        }
+        // 0 + w == w exactly, so a fresh label's sum matches the reference's first push.
+        acc += wt;
     }
-}
-
-/// Inputs for resolving one tile's top-K lists from its row logs.
-struct TopKRows<'a> {
-    list: &'a [u32],
-    logs: &'a [RowLog],
-    last: &'a [[u32; T]; T],
-    rows: usize,
-    cols: usize,
-    k: usize,
-    sort: bool,
-}
-
-/// Where one tile's top-K lists go in the band's storage.
-struct TopKSink<'a, 'b> {
-    start: &'a mut &'b mut [u32],
-    count: &'a mut &'b mut [u16],
-    store: &'a mut &'b mut TopKBand,
-    width: usize,
-    x0: usize,
-}
-
-fn resolve_top_k(rows: &TopKRows, sink: &mut TopKSink, keys: &mut Vec<u64>) {
-    #[cfg(target_arch = "x86_64")]
-    {
-        if std::arch::is_x86_feature_detected!("avx2") {
-            // SAFETY: the CPU supports AVX2 (checked just above).
-            unsafe { resolve_top_k_avx2(rows, sink, keys) };
-            return;
+    if cur_label != 0 {
+        sum[cur] = acc;
+    }
+    let mut best = (0u32, 0.0f32);
+    for (&l, &s) in lab[..used].iter().zip(&sum[..used]) {
+        if best.0 == 0 || s > best.1 || (s == best.1 && l < best.0) {
+            best = (l, s);
         }
     }
-    resolve_top_k_impl(rows, sink, keys);
+    best.0
 }
 
-/// # Safety
-/// The caller must ensure the CPU supports AVX2.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-unsafe fn resolve_top_k_avx2(rows: &TopKRows, sink: &mut TopKSink, keys: &mut Vec<u64>) {
-    resolve_top_k_impl(rows, sink, keys)
-}
-
-/// Gathers each pixel's contributions (front to back) from its row log and keeps the K
-/// heaviest: short lists by branch-free ranking, long ones by selection + sort.
-#[inline(always)]
-fn resolve_top_k_impl(rows: &TopKRows, sink: &mut TopKSink, keys: &mut Vec<u64>) {
-    let k = rows.k;
-    let mut ws = [0.0f32; SMALL_LIST];
-    let mut rk = [0u32; SMALL_LIST];
-    let mut pos = [0u32; SMALL_LIST];
-    for y in 0..rows.rows {
-        let log = &rows.logs[y];
-        let n_rec = log.weights.len();
-        keys.resize(n_rec, 0);
-        for x in 0..rows.cols {
-            let o = y * sink.width + sink.x0 + x;
-            let mut n = 0;
-            if rows.last[y][x] > 0 {
-                for r in 0..n_rec {
-                    let wt = log.weights[r][x];
-                    keys[n] = topk_key(wt, log.ranks[r]);
-                    n += (wt > 0.0) as usize;
+/// Each pixel's list (from the slot columns, or replayed past CAP): voted label, and its
+/// top-K copied into the band's store (front to back; heaviest first if asked).
+#[allow(clippy::too_many_arguments)]
+#[inline(never)]
+fn resolve_lists(
+    ctx: &Ctx,
+    scratch: &mut Scratch,
+    band: &mut BandOut,
+    x0: usize,
+    rows: usize,
+    cols: usize,
+    list: &[u32],
+) {
+    let w = ctx.grid.width as usize;
+    let st = &*scratch.st;
+    let k = ctx.top_k.unwrap_or(usize::MAX);
+    let (Some(start), Some(count), Some(store)) = (
+        band.topk_start.as_deref_mut(),
+        band.topk_count.as_deref_mut(),
+        band.topk_band.as_deref_mut(),
+    ) else {
+        return;
+    };
+    let mut vote_into = if ctx.vote {
+        band.labels.as_deref_mut()
+    } else {
+        None
+    };
+    // Labels by tile rank: L1-resident lookups in the vote.
+    let tile_labels = &mut scratch.tile_labels;
+    if vote_into.is_some() {
+        tile_labels.clear();
+        tile_labels.extend(list.iter().map(|&g| ctx.labels[g as usize]));
+    }
+    // One resize per tile for all its pixels' entries.
+    let mut total = 0usize;
+    for y in 0..rows {
+        for x in 0..cols {
+            total += (st.count[y][x] as usize).min(k);
+        }
+    }
+    let mut at = store.ids.len();
+    store.ids.resize(at + total, 0);
+    store.weights.resize(at + total, 0.0);
+    let (sids, sws) = (&*scratch.ids, &*scratch.ws);
+    for y in 0..rows {
+        for x in 0..cols {
+            let o = y * w + x0 + x;
+            let n = st.count[y][x] as usize;
+            let m = n.min(k);
+            start[o] = at as u32;
+            count[o] = m as u16;
+            let dst_ids = &mut store.ids[at..at + m];
+            let dst_ws = &mut store.weights[at..at + m];
+            at += m;
+            let mut emit = |j: usize, r: u32, wt: f32| {
+                dst_ids[j] = list[r as usize];
+                dst_ws[j] = wt;
+            };
+            let sort = ctx.sort_top_k;
+            if n <= CAP {
+                let at_j = |j: usize| (sids[y][j][x], sws[y][j][x]);
+                if let Some(l) = vote_into.as_deref_mut() {
+                    l[o] = vote_ranks(n, at_j, tile_labels, &mut scratch.votes);
                 }
-            }
-            let base = sink.store.ids.len();
-            sink.start[o] = base as u32;
-            if n <= SMALL_LIST && (rows.sort || n > k) {
-                // Front-to-back keys → weights padded with −1 (never outrank a real weight).
-                ws.fill(-1.0);
-                for i in 0..n {
-                    ws[i] = key_weight(keys[i]);
-                    rk[i] = key_rank(keys[i]);
-                }
-                if n <= SMALL_LIST / 2 {
-                    // Half-width compares for the common short lists.
-                    let (ws16, pos16) = (ws.first_chunk::<16>(), pos.first_chunk_mut::<16>());
-                    weight_positions(ws16.expect("32 ≥ 16"), n, pos16.expect("32 ≥ 16"));
-                } else {
-                    weight_positions(&ws, n, &mut pos);
-                }
-                let m = n.min(k);
-                sink.store.ids.resize(base + m, 0);
-                sink.store.weights.resize(base + m, 0.0);
-                if rows.sort {
-                    for i in 0..n {
-                        let p = pos[i] as usize;
-                        if p < m {
-                            sink.store.ids[base + p] = rows.list[rk[i] as usize];
-                            sink.store.weights[base + p] = ws[i];
-                        }
-                    }
-                } else {
-                    let mut j = base;
-                    for i in 0..n {
-                        if (pos[i] as usize) < m {
-                            sink.store.ids[j] = rows.list[rk[i] as usize];
-                            sink.store.weights[j] = ws[i];
-                            j += 1;
-                        }
-                    }
-                }
-                sink.count[o] = m as u16;
+                select_into(n, at_j, k, sort, &mut scratch.keys, &mut emit);
             } else {
-                let top = select_top_k(&mut keys[..n], k, rows.sort);
-                sink.count[o] = top.len() as u16;
-                for &key in top {
-                    sink.store.ids.push(rows.list[key_rank(key) as usize]);
-                    sink.store.weights.push(key_weight(key));
+                let (px, py) = ((x0 + x) as u32, (band.band * T + y) as u32);
+                let replay = &mut scratch.replay;
+                replay_pixel(ctx.projected, list, px, py, replay);
+                let at_j = |j: usize| replay[j];
+                if let Some(l) = vote_into.as_deref_mut() {
+                    l[o] = vote_ranks(n, at_j, tile_labels, &mut scratch.votes);
                 }
+                select_into(n, at_j, k, sort, &mut scratch.keys, &mut emit);
             }
+        }
+    }
+}
+
+/// Emits the min(n, k) heaviest of a pixel's `n` contributions `at(j)` = (tile rank, weight)
+/// (front to back) as `emit(position, rank, weight)`: heaviest first if `sort`, else front
+/// to back.
+#[inline(always)]
+fn select_into(
+    n: usize,
+    at: impl Fn(usize) -> (u32, f32),
+    k: usize,
+    sort: bool,
+    keys: &mut Vec<u64>,
+    emit: &mut impl FnMut(usize, u32, f32),
+) {
+    let m = n.min(k);
+    if n <= k && (!sort || n <= 1) {
+        for j in 0..n {
+            let (r, wt) = at(j);
+            emit(j, r, wt);
+        }
+    } else if n <= SMALL_LIST {
+        // Short lists by branch-free ranking; weights padded with −1 never outrank.
+        let mut ws32 = [-1.0f32; SMALL_LIST];
+        let mut pos = [0u32; SMALL_LIST];
+        for (j, w) in ws32.iter_mut().enumerate().take(n) {
+            *w = at(j).1;
+        }
+        if n <= SMALL_LIST / 2 {
+            let (w16, p16) = (ws32.first_chunk::<16>(), pos.first_chunk_mut::<16>());
+            weight_positions(w16.expect("32 ≥ 16"), n, p16.expect("32 ≥ 16"));
+        } else {
+            weight_positions(&ws32, n, &mut pos);
+        }
+        let mut j = 0;
+        for (i, &p) in pos.iter().enumerate().take(n) {
+            let p = p as usize;
+            if p < m {
+                let (r, wt) = at(i);
+                emit(if sort { p } else { j }, r, wt);
+                j += 1;
+            }
+        }
+    } else {
+        keys.clear();
+        keys.extend((0..n).map(|j| topk_key(at(j).1, j as u32)));
+        let top = select_top_k(keys, k, sort);
+        for (j, &key) in top.iter().enumerate() {
+            let (r, wt) = at(key_rank(key) as usize);
+            emit(j, r, wt);
         }
     }
 }
