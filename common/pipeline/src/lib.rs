@@ -5,6 +5,7 @@
 pub mod dataset_args;
 pub mod deploy;
 pub mod logging;
+pub mod mapper_stage;
 pub mod metrics;
 pub mod recorder;
 pub mod sensor;

@@ -1,10 +1,11 @@
 //! The tracker stage: frames in, a pose for every frame and keyframes out.
 
 use opengs_geometry::{pose_from_tum, pose_to_tum, Intrinsics};
-use opengs_ipc_schema::service::{FRAMES, KEYFRAMES, POSES};
+use opengs_gicp::{Gaussian, Target};
+use opengs_ipc_schema::service::{FRAMES, KEYFRAMES, MAP_TARGET, POSES};
 use opengs_ipc_schema::{
-    now_ns, FrameHeader, FrameView, KeyframeHeader, KeyframeParts, MessageKind, PoseHeader,
-    PoseStatus, Stamp,
+    now_ns, FrameHeader, FrameView, KeyframeHeader, KeyframeParts, MapTargetHeader, MessageKind,
+    PoseHeader, PoseStatus, Stamp,
 };
 use opengs_runtime::{
     waitset, CallbackProgression, Inlet, Outlet, RunContext, TelemetrySink, WaitSetRunResult,
@@ -20,6 +21,9 @@ pub struct TrackerArgs {
     /// Start at the frame's ground-truth pose instead of the identity.
     #[arg(long)]
     pub gt_first_pose: bool,
+    /// Keep tracking against the tracker's own keyframe model even when the mapper sends Gaussians.
+    #[arg(long)]
+    pub ignore_map: bool,
 }
 
 fn status_of(s: TrackStatus) -> PoseStatus {
@@ -42,6 +46,50 @@ struct TrackerStage {
 }
 
 impl TrackerStage {
+    /// Switches the tracker's target to the map's trackable Gaussians (METHOD §7).
+    fn handle_map_target(&mut self, h: &MapTargetHeader, payload: &[u8]) {
+        let view = match h.decode(payload) {
+            Ok(v) => v,
+            Err(e) => {
+                tracing::error!("map target v{} rejected: {e}", h.map_version);
+                return;
+            }
+        };
+        let Some(tracker) = self.tracker.as_mut() else {
+            return;
+        };
+        let gaussians: Vec<Gaussian> = view
+            .means
+            .iter()
+            .zip(view.rotations)
+            .zip(view.scales)
+            .map(|((m, r), s)| Gaussian {
+                mean: [m[0] as f64, m[1] as f64, m[2] as f64].into(),
+                rotation: r.map(|v| v as f64),
+                scale: [s[0] as f64, s[1] as f64, s[2] as f64].into(),
+            })
+            .collect();
+        let regularization = tracker.config().regularization;
+        match self
+            .pool
+            .install(|| Target::from_gaussians(&gaussians, regularization))
+        {
+            Ok(target) if target.check_registrable().is_ok() => {
+                tracing::info!(
+                    "tracking against map v{} ({} Gaussians)",
+                    h.map_version,
+                    gaussians.len()
+                );
+                tracker.set_target(target);
+            }
+            Ok(_) => tracing::warn!(
+                "map v{} cannot fix a pose yet; keeping the current model",
+                h.map_version
+            ),
+            Err(e) => tracing::error!("map v{}: {e}", h.map_version),
+        }
+    }
+
     fn handle(&mut self, h: &FrameHeader, payload: &[u8]) -> anyhow::Result<()> {
         let start = now_ns();
         let view = match h.decode(payload) {
@@ -151,6 +199,7 @@ impl TrackerStage {
 pub fn run_tracker(ctx: &RunContext, args: &TrackerArgs) -> anyhow::Result<()> {
     let node = ctx.node("tracker")?;
     let frames = Inlet::<FrameHeader>::new(ctx, &node, &FRAMES)?;
+    let map_target = Inlet::<MapTargetHeader>::new(ctx, &node, &MAP_TARGET)?;
     let mut stage = TrackerStage {
         tracker: None,
         pool: rayon::ThreadPoolBuilder::new()
@@ -171,6 +220,13 @@ pub fn run_tracker(ctx: &RunContext, args: &TrackerArgs) -> anyhow::Result<()> {
             Ok(WaitSetRunResult::TerminationRequest | WaitSetRunResult::Interrupt) => return Ok(()),
             Err(e) => anyhow::bail!("WaitSet: {e:?}"),
             Ok(_) => {}
+        }
+        map_target.clear_wakeups();
+        // Only the newest map matters.
+        if let (Some(sample), _) = map_target.receive_newest()? {
+            if !args.ignore_map {
+                stage.handle_map_target(sample.user_header(), sample.payload());
+            }
         }
         frames.clear_wakeups();
         while let Some(sample) = frames.receive()? {

@@ -1,0 +1,41 @@
+use opengs_splat::{LossWeights, PruneConfig};
+
+/// Mapper settings; defaults follow METHOD §8 for TUM-size images.
+#[derive(Debug, Clone, PartialEq)]
+pub struct MapperConfig {
+    /// A keyframe point becomes a Gaussian only if no Gaussian is within this distance (m).
+    pub overlap_distance: f32,
+    /// Opacity of new Gaussians (0.1).
+    pub initial_opacity: f32,
+    /// Optimise at half resolution (keeps up on 2 cores).
+    pub half_resolution: bool,
+    /// Prune every this many iterations.
+    pub prune_every: u64,
+    pub prune: PruneConfig,
+    pub loss: LossWeights,
+    /// Gaussians above this opacity are given to the tracker (0.09 TUM, 0.05 Replica).
+    pub trackable_opacity: f32,
+    /// Scene extent (m) that scales the position learning rate.
+    pub scene_extent: f32,
+    /// Near plane for rendering (m).
+    pub near: f32,
+    /// Seed of the random keyframe choice.
+    pub seed: u64,
+}
+
+impl Default for MapperConfig {
+    fn default() -> Self {
+        Self {
+            overlap_distance: 0.02,
+            initial_opacity: 0.1,
+            half_resolution: true,
+            prune_every: 300,
+            prune: PruneConfig::default(),
+            loss: LossWeights::default(),
+            trackable_opacity: 0.09,
+            scene_extent: 5.0,
+            near: 0.05,
+            seed: 0,
+        }
+    }
+}

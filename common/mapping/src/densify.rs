@@ -1,0 +1,183 @@
+use nalgebra::{Matrix3, Point3, Rotation3, SymmetricEigen, UnitQuaternion};
+use opengs_geometry::{Intrinsics, Pose};
+use opengs_gicp::{NeighbourGrid, PointTree};
+use opengs_splat::Gaussian;
+
+/// A keyframe's points as the tracker sent them.
+pub struct DensifyInput<'a> {
+    /// World-frame points.
+    pub points: &'a [[f32; 3]],
+    /// World-frame covariances, upper triangle `xx xy xz yy yz zz` (normalised: shape only).
+    pub covariances: &'a [[f32; 6]],
+    /// Camera-to-world pose of the keyframe (to colour points from its image).
+    pub pose: Pose,
+    pub intrinsics: Intrinsics,
+    /// RGB8 of the keyframe, row-major.
+    pub rgb: &'a [u8],
+}
+
+/// Neighbours whose mean distance sets a point's size (the local sample spacing).
+const SPACING_NEIGHBOURS: usize = 4;
+/// Flattest axis relative to the others, so surfaces stay surfaces.
+const MIN_AXIS: f64 = 0.1;
+
+/// New Gaussians for the keyframe points that have no map Gaussian within
+/// `overlap_distance` (METHOD §8): mean = point, shape = the point's covariance,
+/// size = local sample spacing, colour from the keyframe image.
+pub fn gaussians_from_points(
+    input: &DensifyInput,
+    map_means: &[[f32; 3]],
+    overlap_distance: f32,
+    opacity: f32,
+) -> Vec<Gaussian> {
+    let d2 = (overlap_distance as f64).powi(2);
+    let existing: Vec<Point3<f64>> = map_means
+        .iter()
+        .map(|m| Point3::new(m[0] as f64, m[1] as f64, m[2] as f64))
+        .collect();
+    let grid =
+        (!existing.is_empty()).then(|| NeighbourGrid::new(&existing, overlap_distance as f64));
+    let points: Vec<Point3<f64>> = input
+        .points
+        .iter()
+        .map(|p| Point3::new(p[0] as f64, p[1] as f64, p[2] as f64))
+        .collect();
+    let tree = PointTree::new(&points);
+    let world_to_camera = input.pose.inverse();
+    let k = &input.intrinsics;
+    let mut out = Vec::new();
+    for (i, p) in points.iter().enumerate() {
+        if !p.coords.iter().all(|v| v.is_finite()) {
+            continue;
+        }
+        if grid
+            .as_ref()
+            .is_some_and(|g| g.nearest_within(p, d2).is_some())
+        {
+            continue;
+        }
+        let Some(uv) = k.project(&(world_to_camera * p)) else {
+            continue;
+        };
+        let (u, v) = (uv.x.round(), uv.y.round());
+        if u < 0.0 || v < 0.0 || u >= k.width as f64 || v >= k.height as f64 {
+            continue;
+        }
+        let px = (v as usize * k.width as usize + u as usize) * 3;
+        let Some(c) = input.rgb.get(px..px + 3) else {
+            continue;
+        };
+        let color = [
+            c[0] as f32 / 255.0,
+            c[1] as f32 / 255.0,
+            c[2] as f32 / 255.0,
+        ];
+        let neighbours = tree.knn(p, SPACING_NEIGHBOURS + 1);
+        let spacing = neighbours
+            .iter()
+            .skip(1)
+            .map(|(_, d)| d.sqrt())
+            .sum::<f64>()
+            / SPACING_NEIGHBOURS as f64;
+        let spacing = if spacing.is_finite() && spacing > 0.0 {
+            spacing
+        } else {
+            0.01
+        };
+        let (rotation, scale) = shape(&input.covariances[i], spacing);
+        out.push(Gaussian::from_values(
+            [p.x as f32, p.y as f32, p.z as f32],
+            rotation,
+            scale,
+            opacity,
+            color,
+            0,
+        ));
+    }
+    out
+}
+
+/// Rotation (w, x, y, z) and scales (m) of a Gaussian with the covariance's shape and `spacing` size.
+fn shape(cov: &[f32; 6], spacing: f64) -> ([f32; 4], [f32; 3]) {
+    let c = cov.map(|v| v as f64);
+    let m = Matrix3::new(c[0], c[1], c[2], c[1], c[3], c[4], c[2], c[4], c[5]);
+    if !m.iter().all(|v| v.is_finite()) {
+        let s = spacing as f32;
+        return ([1.0, 0.0, 0.0, 0.0], [s, s, s]);
+    }
+    let eig = SymmetricEigen::new(m);
+    let largest = eig.eigenvalues.max().max(1e-12);
+    let mut axes = eig.eigenvectors;
+    if axes.determinant() < 0.0 {
+        axes.column_mut(2).neg_mut();
+    }
+    let q = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(axes));
+    // Relative axis lengths from the covariance, the largest one spacing long.
+    let scale = eig
+        .eigenvalues
+        .map(|l| (spacing * (l.max(0.0) / largest).sqrt().max(MIN_AXIS)) as f32);
+    (
+        [q.w as f32, q.i as f32, q.j as f32, q.k as f32],
+        [scale[0], scale[1], scale[2]],
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn plane_covariance_gives_a_flat_disk_of_the_spacing() {
+        // A plane z = const: large xx, yy; tiny zz.
+        let (q, s) = shape(&[1.0, 0.0, 0.0, 1.0, 0.0, 1e-3], 0.01);
+        let mut sorted = s;
+        sorted.sort_by(f32::total_cmp);
+        assert!((sorted[2] - 0.01).abs() < 1e-6 && (sorted[1] - 0.01).abs() < 1e-6);
+        assert!((sorted[0] - 0.001).abs() < 1e-6, "{s:?}");
+        // The flat axis is z.
+        let rot = UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(
+            q[0] as f64,
+            q[1] as f64,
+            q[2] as f64,
+            q[3] as f64,
+        ));
+        let flat = s
+            .iter()
+            .enumerate()
+            .min_by(|a, b| a.1.total_cmp(b.1))
+            .map(|(i, _)| i)
+            .unwrap_or(0);
+        let axis = rot * nalgebra::Vector3::ith(flat, 1.0);
+        assert!(axis.z.abs() > 0.999, "{axis:?}");
+    }
+
+    #[test]
+    fn points_near_the_map_are_skipped_and_colours_come_from_the_image() {
+        let k = Intrinsics::new(10.0, 10.0, 1.5, 1.5, 4, 4);
+        let rgb: Vec<u8> = (0..16).flat_map(|i| [i as u8 * 10, 0, 255]).collect();
+        // Pixel (u, v) = (2, 1) at depth 1 m, camera at the origin looking down +z.
+        let p = k.backproject(2.0, 1.0, 1.0);
+        let q = k.backproject(1.0, 2.0, 1.0);
+        let points = [[p.x as f32, p.y as f32, 1.0], [q.x as f32, q.y as f32, 1.0]];
+        let covs = [[1.0, 0.0, 0.0, 1.0, 0.0, 1e-3]; 2];
+        let input = DensifyInput {
+            points: &points,
+            covariances: &covs,
+            pose: Pose::identity(),
+            intrinsics: k,
+            rgb: &rgb,
+        };
+        let all = gaussians_from_points(&input, &[], 0.02, 0.1);
+        assert_eq!(all.len(), 2);
+        assert!(
+            (all[0].color()[0] - 60.0 / 255.0).abs() < 1e-5,
+            "pixel 6 has red 60"
+        );
+        assert!((all[0].opacity() - 0.1).abs() < 1e-6);
+        // The first point already has a Gaussian 1 cm away: only the second is new.
+        let near = [[points[0][0] + 0.01, points[0][1], 1.0]];
+        let new = gaussians_from_points(&input, &near, 0.02, 0.1);
+        assert_eq!(new.len(), 1);
+        assert!((new[0].mean[1] - points[1][1]).abs() < 1e-6);
+    }
+}

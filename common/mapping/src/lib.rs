@@ -1,0 +1,14 @@
+//! The Gaussian map as the mapper stage keeps it (METHOD §8): Gaussians
+//! initialised from keyframe points where the map is empty, optimised
+//! continuously against stored keyframes (newest first, then random), pruned,
+//! and the trackable subset handed back to the tracker.
+
+mod config;
+mod densify;
+mod keyframe;
+mod mapper;
+
+pub use config::MapperConfig;
+pub use densify::{gaussians_from_points, DensifyInput};
+pub use keyframe::StoredKeyframe;
+pub use mapper::{Mapper, TrackableGaussians};

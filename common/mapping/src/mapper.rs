@@ -1,0 +1,125 @@
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+use opengs_splat::{
+    prune, train_step, Adam, AdamConfig, GaussianMap, StepStats, TrainConfig, TrainWorkspace,
+};
+
+use crate::densify::{gaussians_from_points, DensifyInput};
+use crate::{MapperConfig, StoredKeyframe};
+
+/// The trackable Gaussians (opacity above the threshold) in the tracker's terms.
+#[derive(Debug, Clone, Default)]
+pub struct TrackableGaussians {
+    pub means: Vec<[f32; 3]>,
+    /// Unit quaternions (w, x, y, z).
+    pub rotations: Vec<[f32; 4]>,
+    /// Scales in metres.
+    pub scales: Vec<[f32; 3]>,
+}
+
+/// Owns the map, its optimiser state and the keyframes it optimises against.
+pub struct Mapper {
+    config: MapperConfig,
+    map: GaussianMap,
+    adam: Adam,
+    keyframes: Vec<StoredKeyframe>,
+    workspace: TrainWorkspace,
+    rng: ChaCha8Rng,
+    iterations: u64,
+    /// Keyframes added since the newest one was last optimised (newest first).
+    fresh: Vec<usize>,
+}
+
+impl Mapper {
+    pub fn new(config: MapperConfig) -> Self {
+        Self::with_map(config, GaussianMap::new())
+    }
+
+    /// Resumes from a checkpointed map (a restarted mapper).
+    pub fn with_map(config: MapperConfig, map: GaussianMap) -> Self {
+        let adam = Adam::new(AdamConfig::gs_defaults(config.scene_extent), map.len());
+        let rng = ChaCha8Rng::seed_from_u64(config.seed);
+        Self {
+            config,
+            map,
+            adam,
+            keyframes: Vec::new(),
+            workspace: TrainWorkspace::new(),
+            rng,
+            iterations: 0,
+            fresh: Vec::new(),
+        }
+    }
+
+    pub fn map(&self) -> &GaussianMap {
+        &self.map
+    }
+
+    pub fn keyframes(&self) -> usize {
+        self.keyframes.len()
+    }
+
+    pub fn iterations(&self) -> u64 {
+        self.iterations
+    }
+
+    /// Adds a keyframe: new Gaussians where the map is empty, and the frame as a training target.
+    /// Returns how many Gaussians were added.
+    pub fn add_keyframe(&mut self, input: &DensifyInput, keyframe: StoredKeyframe) -> usize {
+        let new = gaussians_from_points(
+            input,
+            &self.map.means,
+            self.config.overlap_distance,
+            self.config.initial_opacity,
+        );
+        for g in &new {
+            self.map.push(*g);
+        }
+        self.adam.resize(self.map.len());
+        self.keyframes.push(keyframe);
+        self.fresh.push(self.keyframes.len() - 1);
+        new.len()
+    }
+
+    /// One optimisation iteration: the newest unoptimised keyframe first, else a random one.
+    pub fn step(&mut self) -> Option<StepStats> {
+        if self.keyframes.is_empty() || self.map.is_empty() {
+            return None;
+        }
+        let index = match self.fresh.pop() {
+            Some(i) => i,
+            None => self.rng.gen_range(0..self.keyframes.len()),
+        };
+        let kf = &self.keyframes[index];
+        let config = TrainConfig {
+            loss: self.config.loss,
+        };
+        let stats = train_step(
+            &mut self.map,
+            &mut self.adam,
+            &kf.camera,
+            &kf.target,
+            &config,
+            &mut self.workspace,
+        );
+        self.iterations += 1;
+        if self.iterations % self.config.prune_every == 0 {
+            prune(&mut self.map, Some(&mut self.adam), &self.config.prune);
+        }
+        Some(stats)
+    }
+
+    /// Gaussians opaque enough to track against (METHOD §7).
+    pub fn trackable(&self) -> TrackableGaussians {
+        let mut t = TrackableGaussians::default();
+        for i in 0..self.map.len() {
+            if self.map.opacity(i) > self.config.trackable_opacity {
+                t.means.push(self.map.means[i]);
+                t.rotations.push(self.map.rotations[i]);
+                t.scales.push(self.map.scale(i));
+            }
+        }
+        t
+    }
+}

@@ -1,0 +1,126 @@
+//! Which segmenter to run, as named on the command line.
+
+use std::fmt;
+use std::str::FromStr;
+
+use crate::{ClassicSegmenter, PerceptionError, PriorSegmenter, Segmenter, SegmenterOptions};
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+pub enum SegmenterKind {
+    /// Graph-based colour + depth + normal segmentation, no weights.
+    #[default]
+    Classic,
+    /// Ground-truth instance labels of the dataset ("Ours(Prior)").
+    Prior,
+    /// SAM ViT encoder/decoder (ONNX).
+    Sam,
+    /// MobileSAMv2 (ONNX).
+    MobileSamV2,
+}
+
+impl SegmenterKind {
+    pub const ALL: [SegmenterKind; 4] = [Self::Classic, Self::Prior, Self::Sam, Self::MobileSamV2];
+
+    pub fn as_str(&self) -> &'static str {
+        match self {
+            Self::Classic => "classic",
+            Self::Prior => "prior",
+            Self::Sam => "sam",
+            Self::MobileSamV2 => "mobilesamv2",
+        }
+    }
+
+    /// Builds the segmenter with default options (model-based kinds fail:
+    /// they need model paths, see [`SegmenterKind::create_with`]).
+    pub fn create(&self) -> Result<Box<dyn Segmenter>, PerceptionError> {
+        self.create_with(&SegmenterOptions::default())
+    }
+
+    /// Builds the segmenter; `sam` and `mobilesamv2` load `options.sam_models`.
+    pub fn create_with(
+        &self,
+        options: &SegmenterOptions,
+    ) -> Result<Box<dyn Segmenter>, PerceptionError> {
+        match self {
+            Self::Classic => Ok(Box::new(ClassicSegmenter::new(options.classic)?)),
+            Self::Prior => Ok(Box::new(PriorSegmenter::new())),
+            Self::Sam | Self::MobileSamV2 => self.create_model_runner(options),
+        }
+    }
+
+    #[cfg(feature = "onnx")]
+    fn create_model_runner(
+        &self,
+        options: &SegmenterOptions,
+    ) -> Result<Box<dyn Segmenter>, PerceptionError> {
+        let paths = options
+            .sam_models
+            .as_ref()
+            .ok_or_else(|| self.unavailable("needs encoder and decoder model paths"))?;
+        let segmenter = crate::sam::SamSegmenter::new(
+            *self,
+            paths,
+            crate::sam::AmgParams::default(),
+            options.threads,
+        )?;
+        Ok(Box::new(segmenter))
+    }
+
+    #[cfg(not(feature = "onnx"))]
+    fn create_model_runner(
+        &self,
+        _options: &SegmenterOptions,
+    ) -> Result<Box<dyn Segmenter>, PerceptionError> {
+        Err(self.unavailable("built without the `onnx` cargo feature; use classic or prior"))
+    }
+
+    fn unavailable(&self, reason: &str) -> PerceptionError {
+        PerceptionError::Unavailable {
+            kind: self.as_str().to_string(),
+            reason: reason.to_string(),
+        }
+    }
+}
+
+impl fmt::Display for SegmenterKind {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
+impl FromStr for SegmenterKind {
+    type Err = PerceptionError;
+
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        let key: String = s
+            .trim()
+            .chars()
+            .filter(|c| !matches!(c, '-' | '_'))
+            .collect::<String>()
+            .to_ascii_lowercase();
+        match key.as_str() {
+            "classic" => Ok(Self::Classic),
+            "prior" => Ok(Self::Prior),
+            "sam" => Ok(Self::Sam),
+            "mobilesamv2" => Ok(Self::MobileSamV2),
+            _ => Err(PerceptionError::UnknownKind(s.to_string())),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn names_round_trip() {
+        for kind in SegmenterKind::ALL {
+            assert_eq!(kind.to_string().parse::<SegmenterKind>().ok(), Some(kind));
+        }
+        assert_eq!(
+            "Mobile-SAM-v2".parse::<SegmenterKind>().ok(),
+            Some(SegmenterKind::MobileSamV2)
+        );
+        assert!("yolo".parse::<SegmenterKind>().is_err());
+    }
+}

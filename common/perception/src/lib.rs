@@ -1,0 +1,26 @@
+//! Open-set instance segmentation front-ends for opengs (METHOD.md §6).
+//!
+//! Every back-end implements [`Segmenter`]: an RGB-D frame in, a label map
+//! plus the input Label-Class table out. `classic` needs no weights,
+//! `prior` replays the dataset's ground-truth instances; `sam` and
+//! `mobilesamv2` run exported ONNX models (cargo feature `onnx`, runtime
+//! library from `ORT_DYLIB_PATH`, see DEPS.md).
+
+pub mod bench;
+pub mod classic;
+mod error;
+mod kind;
+mod model_paths;
+mod prior;
+#[cfg(feature = "onnx")]
+pub mod sam;
+mod segmentation;
+mod segmenter;
+
+pub use classic::{ClassicParams, ClassicSegmenter, EdgeWeights};
+pub use error::PerceptionError;
+pub use kind::SegmenterKind;
+pub use model_paths::{SamModelPaths, SegmenterOptions};
+pub use prior::PriorSegmenter;
+pub use segmentation::{SegmentInfo, Segmentation};
+pub use segmenter::{Segmenter, SegmenterInput};
