@@ -1,9 +1,13 @@
 #!/usr/bin/env bash
-# The project's one test command (README and .ci/run both call it):
-# builds every stage binary the end-to-end tests launch, then runs all tests.
+# The project's one test command (README and .ci/run both call it): fetches the
+# ONNX Runtime library, builds every stage binary the end-to-end tests launch,
+# then checks formatting and lints and runs all tests, the ONNX ones included.
 set -euo pipefail
 cd "$(dirname "$0")/.."
+ORT_DYLIB_PATH="$(scripts/setup-ort.sh)"
+export ORT_DYLIB_PATH OPENGS_REQUIRE_ORT=1
+features=(--features opengs-perception/onnx)
 cargo fmt --all -- --check
-cargo build --release --workspace --bins
-cargo clippy --release --workspace --all-targets -- -D warnings
-cargo test --release --workspace
+cargo build --release --workspace --bins "${features[@]}"
+cargo clippy --release --workspace --all-targets "${features[@]}" -- -D warnings
+cargo test --release --workspace "${features[@]}"

@@ -10,9 +10,9 @@ use crate::{MessageKind, SchemaError, Stamp};
 /// Most source points a keyframe may carry (a 1200×680 frame at stride 1).
 pub const MAX_KEYFRAME_POINTS: u32 = 1200 * 680;
 
-/// A keyframe from the tracker for the mapper.
+/// A keyframe from the tracker for the mapper and the segmenter.
 /// Payload: points `f32[3n]` (world frame) | covariances `f32[6n]` (xx xy xz yy yz zz) |
-/// depth `u16[W·H]` | rgb `u8[3·W·H]`.
+/// depth `u16[W·H]` | labels `u16[W·H]` (if [`KeyframeHeader::HAS_LABELS`]) | rgb `u8[3·W·H]`.
 #[derive(Debug, Clone, Copy, Default, ZeroCopySend)]
 #[type_name("opengs::KeyframeHeader")]
 #[repr(C)]
@@ -24,6 +24,8 @@ pub struct KeyframeHeader {
     pub height: u32,
     pub depth_scale: f32,
     pub point_count: u32,
+    pub flags: u32,
+    pub _reserved: u32,
     /// Index of the frame in its dataset.
     pub frame_index: u64,
 }
@@ -32,6 +34,8 @@ pub struct KeyframeParts<'a> {
     pub points: &'a [[f32; 3]],
     pub covariances: &'a [[f32; 6]],
     pub depth: &'a [u16],
+    /// Ground-truth instance labels, when the dataset has them (the prior segmenter uses them).
+    pub labels: Option<&'a [u16]>,
     pub rgb: &'a [u8],
 }
 
@@ -41,10 +45,13 @@ pub struct KeyframeView<'a> {
     pub points: &'a [[f32; 3]],
     pub covariances: &'a [[f32; 6]],
     pub depth: &'a [u16],
+    pub labels: Option<&'a [u16]>,
     pub rgb: &'a [u8],
 }
 
 impl KeyframeHeader {
+    pub const HAS_LABELS: u32 = 1;
+
     #[allow(clippy::too_many_arguments)]
     pub fn new(
         mut stamp: Stamp,
@@ -54,6 +61,7 @@ impl KeyframeHeader {
         height: u32,
         depth_scale: f32,
         point_count: u32,
+        has_labels: bool,
         frame_index: u64,
     ) -> Self {
         stamp.kind = MessageKind::Keyframe as u32;
@@ -65,6 +73,8 @@ impl KeyframeHeader {
             height,
             depth_scale,
             point_count,
+            flags: if has_labels { Self::HAS_LABELS } else { 0 },
+            _reserved: 0,
             frame_index,
         };
         h.stamp.payload_len = h.layout_len() as u64;
@@ -74,14 +84,20 @@ impl KeyframeHeader {
     fn layout_len(&self) -> usize {
         let n = self.width as usize * self.height as usize;
         let p = self.point_count as usize;
+        let labels = if self.has_labels() { section_len::<u16>(n) } else { 0 };
         section_len::<[f32; 3]>(p)
             + section_len::<[f32; 6]>(p)
             + section_len::<u16>(n)
+            + labels
             + section_len::<u8>(3 * n)
     }
 
     pub fn payload_len(&self) -> usize {
         self.stamp.payload_len as usize
+    }
+
+    pub fn has_labels(&self) -> bool {
+        self.flags & Self::HAS_LABELS != 0
     }
 
     pub fn encode(
@@ -95,6 +111,7 @@ impl KeyframeHeader {
             || parts.covariances.len() != p
             || parts.depth.len() != n
             || parts.rgb.len() != 3 * n
+            || parts.labels.map(|l| l.len()) != self.has_labels().then_some(n)
         {
             return Err(SchemaError::Invalid(
                 "keyframe parts do not match the header",
@@ -105,6 +122,9 @@ impl KeyframeHeader {
         w.put(parts.points)?;
         w.put(parts.covariances)?;
         w.put(parts.depth)?;
+        if let Some(labels) = parts.labels {
+            w.put(labels)?;
+        }
         w.put(parts.rgb)?;
         w.finish()
     }
@@ -124,6 +144,9 @@ impl KeyframeHeader {
         if !(self.depth_scale.is_finite() && self.depth_scale > 0.0) {
             return Err(SchemaError::NonFinite("depth_scale"));
         }
+        if self.flags & !Self::HAS_LABELS != 0 {
+            return Err(SchemaError::Invalid("unknown keyframe flags"));
+        }
         check_total(self.layout_len(), payload.len())?;
         let mut r = PayloadReader::new(payload)?;
         Ok(KeyframeView {
@@ -131,6 +154,7 @@ impl KeyframeHeader {
             points: r.take(p)?,
             covariances: r.take(p)?,
             depth: r.take(n)?,
+            labels: if self.has_labels() { Some(r.take(n)?) } else { None },
             rgb: r.take(3 * n)?,
         })
     }

@@ -181,6 +181,7 @@ fn keyframe_round_trip_and_rejects() {
     let points = vec![[1.0f32, 2.0, 3.0], [4.0, 5.0, 6.0], [7.0, 8.0, 9.5]];
     let covs = vec![[1.0f32, 0.0, 0.0, 1.0, 0.0, 1.0]; 3];
     let depth = vec![1234u16; n];
+    let labels: Vec<u16> = (0..n as u16).collect();
     let rgb = vec![9u8; 3 * n];
     let hdr = KeyframeHeader::new(
         stamp(),
@@ -190,6 +191,7 @@ fn keyframe_round_trip_and_rejects() {
         h,
         5000.0,
         3,
+        true,
         11,
     );
     let mut buf = buffer(hdr.payload_len());
@@ -199,6 +201,7 @@ fn keyframe_round_trip_and_rejects() {
             points: &points,
             covariances: &covs,
             depth: &depth,
+            labels: Some(&labels),
             rgb: &rgb,
         },
         as_uninit_mut(payload),
@@ -208,7 +211,14 @@ fn keyframe_round_trip_and_rejects() {
     assert_eq!(v.points, &points[..]);
     assert_eq!(v.covariances, &covs[..]);
     assert_eq!(v.depth, &depth[..]);
+    assert_eq!(v.labels, Some(&labels[..]));
     assert_eq!(v.rgb, &rgb[..]);
+    let mut bad = hdr;
+    bad.flags = 0; // claims no labels plane, but one is there
+    assert!(matches!(bad.decode(payload), Err(SchemaError::LayoutMismatch { .. })));
+    let mut bad = hdr;
+    bad.flags = 6;
+    assert!(matches!(bad.decode(payload), Err(SchemaError::Invalid(_))));
     let mut bad = hdr;
     bad.point_count = 4;
     assert!(matches!(

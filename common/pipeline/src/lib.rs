@@ -8,6 +8,7 @@ pub mod logging;
 pub mod mapper_stage;
 pub mod metrics;
 pub mod recorder;
+pub mod segmenter_stage;
 pub mod sensor;
 pub mod stage_process;
 pub mod status;

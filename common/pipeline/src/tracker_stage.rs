@@ -181,12 +181,14 @@ impl TrackerStage {
             h.height,
             h.depth_scale,
             points.len() as u32,
+            view.labels.is_some(),
             h.frame_index,
         );
         let parts = KeyframeParts {
             points: &points,
             covariances: &covariances,
             depth: view.depth,
+            labels: view.labels,
             rgb: view.rgb,
         };
         self.keyframes

@@ -1,7 +1,8 @@
 //! `cargo bench -p opengs-splat`: prints the render benchmark table.
 //! `cargo bench -p opengs-splat -- stages` prints a per-stage breakdown at 100k, 640×480.
 //! `cargo bench -p opengs-splat -- quick` times only the issue-4 case (100k, 640×480).
-//! `cargo bench -p opengs-splat -- loop N` renders case (b) N times (for a profiler).
+//! `cargo bench -p opengs-splat -- loop N [a|sorted|unsorted]` renders case (b) (or the named
+//! variant) N times, for a profiler.
 
 use opengs_splat::bench::{run_render_bench, stage_breakdown, BenchConfig};
 use opengs_splat::{scene, Camera, RenderRequest};
@@ -41,7 +42,18 @@ fn main() {
         let map = scene::indoor_scene(100_000, 7);
         let k = opengs_splat::bench::intrinsics_for_size(640, 480);
         let cam = Camera::from_pose(k, &scene::indoor_poses(1)[0], 0.05);
-        let req = RenderRequest::semantic(50);
+        let req = match args.get(i + 2).map(String::as_str) {
+            Some("a") => RenderRequest::color_depth(),
+            Some("sorted") => RenderRequest {
+                sort_top_k: true,
+                ..RenderRequest::semantic(50)
+            },
+            Some("unsorted") => RenderRequest {
+                sort_top_k: false,
+                ..RenderRequest::semantic(50)
+            },
+            _ => RenderRequest::semantic(50),
+        };
         let mut r = opengs_splat::render(&map, &cam, &req);
         for _ in 0..n {
             opengs_splat::render_into(&map, &cam, &req, &mut r);

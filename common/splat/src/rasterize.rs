@@ -22,9 +22,7 @@ use crate::blend::{alpha_of, gaussian_power, MIN_ALPHA, MIN_TRANSMITTANCE};
 use crate::output::{RenderOutput, RenderRequest};
 use crate::project::Projected;
 use crate::tiles::{TileGrid, TILE_SIZE};
-use crate::topk::{
-    key_rank, key_weight, select_top_k, topk_key, weight_positions, TopKBand, SMALL_LIST,
-};
+use crate::topk::{key_rank, select_top_k, topk_key, weight_positions, TopKBand};
 use crate::voting::vote;
 
 const T: usize = TILE_SIZE as usize;
@@ -95,12 +93,9 @@ pub fn rasterize_into(
             t.height = grid.height;
             fit(&mut t.start, n, 0);
             fit(&mut t.count, n, 0);
+            // Band stores keep their length (they are truncated after writing).
             t.bands
                 .resize_with(grid.tiles_y as usize, TopKBand::default);
-            for b in &mut t.bands {
-                b.ids.clear();
-                b.weights.clear();
-            }
             Some(t)
         }
         (None, _) => None,
@@ -121,7 +116,6 @@ pub fn rasterize_into(
         sort_top_k: request.sort_top_k,
         visible: visible.as_deref(),
         simd: simd_level(),
-        skip_push: std::env::var("EXP").as_deref() == Ok("2"),
     };
 
     let band_len = T * w;
@@ -151,12 +145,11 @@ pub fn rasterize_into(
             topk_start: tk_start.as_mut().and_then(|it| it.next()),
             topk_count: tk_count.as_mut().and_then(|it| it.next()),
             topk_band: tk_bands.as_mut().and_then(|it| it.next()),
+            topk_len: 0,
         })
         .collect();
 
-    // Lists when top-K is asked for (labels then vote from them), lane voting for labels alone.
-    let lists = top_k.is_some();
-    let lane_vote = request.labels && !lists;
+    let (lists, lane_vote) = (top_k.is_some(), request.labels);
     bands.into_par_iter().for_each(|mut band| {
         SCRATCH.with(|cell| {
             let mut guard = cell.borrow_mut();
@@ -166,8 +159,13 @@ pub fn rasterize_into(
                 match (lists, lane_vote) {
                     (false, false) => run_tile::<false, false>(&ctx, scratch, &mut band, tx),
                     (false, true) => run_tile::<false, true>(&ctx, scratch, &mut band, tx),
-                    (true, _) => run_tile::<true, false>(&ctx, scratch, &mut band, tx),
+                    (true, false) => run_tile::<true, false>(&ctx, scratch, &mut band, tx),
+                    (true, true) => run_tile::<true, true>(&ctx, scratch, &mut band, tx),
                 }
+            }
+            if let Some(store) = band.topk_band.as_deref_mut() {
+                store.ids.truncate(band.topk_len);
+                store.weights.truncate(band.topk_len);
             }
         })
     });
@@ -252,7 +250,6 @@ struct Ctx<'a> {
     sort_top_k: bool,
     visible: Option<&'a [AtomicBool]>,
     simd: Simd,
-    skip_push: bool,
 }
 
 /// Output slices of one band of 16 image rows.
@@ -267,6 +264,8 @@ struct BandOut<'a> {
     topk_start: Option<&'a mut [u32]>,
     topk_count: Option<&'a mut [u16]>,
     topk_band: Option<&'a mut TopKBand>,
+    /// Top-K entries this band has written so far.
+    topk_len: usize,
 }
 
 /// Per-pixel accumulators of one tile, as 16 rows of 16 lanes. Transmittance is stored
@@ -292,10 +291,13 @@ struct TileState {
 /// Label slots per pixel held in vector registers (few labels meet at a pixel).
 const VOTE_SLOTS: usize = 3;
 
-/// Per-pixel contribution lists of one tile as `[row][slot][lane]`: the 16 pixels of a row
-/// append to neighbouring words, and one pixel's list is read from consecutive cache lines
-/// (slot-major over the whole tile put a pixel's slots 1 KB apart, all in 4 L1 sets).
-type Slots<V> = [[[V; T]; CAP]; T];
+/// Room per pixel list: CAP entries plus 16 of padding, so the last rank block fits and the
+/// lists of consecutive pixels start 9 cache lines apart (every L1 set, no aliasing).
+const STRIDE: usize = CAP + 16;
+
+/// Per-pixel contribution lists of one tile, `[row][lane][slot]`: each pixel's list is
+/// contiguous (copied out with vector moves); a row's 16 appends touch 16 list heads.
+type Slots<V> = [[[V; STRIDE]; T]; T];
 
 struct Scratch {
     st: Box<TileState>,
@@ -304,7 +306,7 @@ struct Scratch {
     keys: Vec<u64>,
     votes: Vec<(u32, f32)>,
     replay: Vec<(u32, f32)>,
-    tile_labels: Vec<u32>,
+    pos: [u32; CAP],
 }
 
 thread_local! {
@@ -314,7 +316,7 @@ thread_local! {
 
 /// A zeroed boxed value built on the heap (the slot arrays are too big for the stack).
 fn boxed_zeroed<V: Copy + Default>() -> Box<Slots<V>> {
-    let v: Vec<[[V; T]; CAP]> = vec![[[V::default(); T]; CAP]; T];
+    let v: Vec<[[V; STRIDE]; T]> = vec![[[V::default(); STRIDE]; T]; T];
     match v.into_boxed_slice().try_into() {
         Ok(b) => b,
         Err(_) => unreachable!("the vector has T elements"),
@@ -343,7 +345,7 @@ impl Scratch {
             keys: Vec::new(),
             votes: Vec::new(),
             replay: Vec::new(),
-            tile_labels: Vec::new(),
+            pos: [0; CAP],
         }
     }
 }
@@ -416,7 +418,7 @@ fn tile<const LISTS: bool, const VOTE: bool>(
 ) {
     let t = band.band * ctx.grid.tiles_x as usize + tx;
     tile_kernel::<LISTS, VOTE>(ctx, scratch, t);
-    write_tile::<LISTS>(ctx, scratch, band, tx, t);
+    write_tile::<LISTS, VOTE>(ctx, scratch, band, tx, t);
 }
 
 #[inline(always)]
@@ -502,11 +504,10 @@ fn tile_kernel<const LISTS: bool, const VOTE: bool>(ctx: &Ctx, scratch: &mut Scr
             if VOTE && label != 0 {
                 vote_lanes(label, &w, st, ly);
             }
-            if LISTS && !ctx.skip_push {
-                let r = rank as u32;
+            if LISTS {
                 push_row(
                     mask,
-                    r,
+                    gid,
                     &w,
                     ly,
                     &mut st.count,
@@ -573,12 +574,12 @@ fn blend_row(
     (mask, newly_done)
 }
 
-/// Appends (tile rank, weight) to the list of every pixel in `mask` on tile row `ly`.
+/// Appends (Gaussian id, weight) to the list of every pixel in `mask` on tile row `ly`.
 /// A pixel past CAP keeps counting (and overwrites its last slot); it is replayed later.
 #[inline(always)]
 fn push_row(
     mut mask: u32,
-    rank: u32,
+    gid: u32,
     w: &[f32; T],
     ly: usize,
     count: &mut [[u32; T]; T],
@@ -591,8 +592,8 @@ fn push_row(
         mask &= mask - 1;
         let n = count[i];
         let j = (n as usize).min(CAP - 1);
-        ids[ly][j][i] = rank;
-        ws[ly][j][i] = w[i];
+        ids[ly][i][j] = gid;
+        ws[ly][i][j] = w[i];
         count[i] = n + 1;
     }
 }
@@ -654,7 +655,7 @@ pub(crate) fn replay_pixel(
 
 /// Copies a finished tile into the band's images, and resolves labels and top-K.
 #[inline(always)]
-fn write_tile<const LISTS: bool>(
+fn write_tile<const LISTS: bool, const VOTE: bool>(
     ctx: &Ctx,
     scratch: &mut Scratch,
     band: &mut BandOut,
@@ -680,107 +681,61 @@ fn write_tile<const LISTS: bool>(
         band.n_contrib[o..o + cols].copy_from_slice(&st.last[y][..cols]);
     }
     let list = ctx.bins.tile(tile);
-    if LISTS {
-        if std::env::var("EXP").as_deref() == Ok("1") {
-            return;
-        }
-        resolve_lists(ctx, scratch, band, x0, rows, cols, list);
-        return;
-    }
-    if let Some(labels) = band.labels.as_mut() {
-        for y in 0..rows {
-            for x in 0..cols {
-                let label = if st.vote_overflow[y][x] != 0 {
-                    let contribs = &mut scratch.replay;
-                    let (px, py) = ((x0 + x) as u32, (band.band * T + y) as u32);
-                    replay_pixel(ctx.projected, list, px, py, contribs);
-                    let it = contribs
-                        .iter()
-                        .map(|&(r, wt)| (ctx.labels[list[r as usize] as usize], wt));
-                    vote(it, &mut scratch.votes)
-                } else {
-                    let mut best = (0u32, 0.0f32);
-                    for slot in 0..VOTE_SLOTS {
-                        let (l, s) = (st.vote_label[slot][y][x], st.vote_sum[slot][y][x]);
-                        if l != 0 && (best.0 == 0 || s > best.1 || (s == best.1 && l < best.0)) {
-                            best = (l, s);
+    if VOTE {
+        if let Some(labels) = band.labels.as_deref_mut() {
+            for y in 0..rows {
+                for x in 0..cols {
+                    let label = match slot_label(st, y, x) {
+                        Some(l) => l,
+                        // More labels than slots: vote over the pixel's list (or its replay).
+                        None if LISTS && (st.count[y][x] as usize) <= CAP => {
+                            let n = st.count[y][x] as usize;
+                            let (ids, ws) = (&scratch.ids[y][x][..n], &scratch.ws[y][x][..n]);
+                            let it = ids.iter().zip(ws).map(|(&i, &w)| (ctx.labels[i as usize], w));
+                            vote(it, &mut scratch.votes)
                         }
-                    }
-                    best.0
-                };
-                labels[y * w + x0 + x] = label;
+                        None => {
+                            let contribs = &mut scratch.replay;
+                            let (px, py) = ((x0 + x) as u32, (band.band * T + y) as u32);
+                            replay_pixel(ctx.projected, list, px, py, contribs);
+                            let it = contribs
+                                .iter()
+                                .map(|&(r, wt)| (ctx.labels[list[r as usize] as usize], wt));
+                            vote(it, &mut scratch.votes)
+                        }
+                    };
+                    labels[y * w + x0 + x] = label;
+                }
             }
         }
+    }
+    if LISTS {
+        resolve_top_k(ctx, scratch, band, x0, rows, cols, list);
     }
 }
 
-/// Label slots of the list vote before it falls back to the general [`vote`].
-const LIST_VOTE_SLOTS: usize = 8;
-
-/// GS Voting over one pixel's `n` contributions `at(j)` = (tile rank, weight), front to
-/// back: the same sums, in the same order, as [`vote`] and the reference, so the same winner.
-#[inline(never)]
-fn vote_ranks(
-    n: usize,
-    at: impl Fn(usize) -> (u32, f32),
-    tile_labels: &[u32],
-    votes: &mut Vec<(u32, f32)>,
-) -> u32 {
-    let mut lab = [0u32; LIST_VOTE_SLOTS];
-    let mut sum = [0.0f32; LIST_VOTE_SLOTS];
-    let mut used = 0usize;
-    // The running label's sum lives in a register (a store/load per entry would chain
-    // through store forwarding); it is written back when the label changes.
-    let mut cur = 0usize;
-    let mut cur_label = 0u32;
-    let mut acc = 0.0f32;
-    for j in 0..n {
-        let (r, wt) = at(j);
-        let l = tile_labels[r as usize];
-        if l == 0 {
-            continue;
-        }
-        if l != cur_label {
-            if cur_label != 0 {
-                sum[cur] = acc;
-            }
-            cur_label = l;
-            cur = lab[..used].iter().position(|&x| x == l).unwrap_or(used);
-            if cur == used {
-                if used == LIST_VOTE_SLOTS {
-                    let it = (0..n).map(|j| {
-                        let (r, wt) = at(j);
-                        (tile_labels[r as usize], wt)
-                    });
-                    return vote(it, votes);
-                }
-                lab[used] = l;
-                sum[used] = 0.0;
-                used += 1;
-            }
-            cur &= LIST_VOTE_SLOTS - 1;
-            acc = sum[cur];
-        }
-        // 0 + w == w exactly, so a fresh label's sum matches the reference's first push.
-        acc += wt;
-    }
-    if cur_label != 0 {
-        sum[cur] = acc;
+/// The voted label from a pixel's lane slots; `None` when it met more labels than slots.
+#[inline(always)]
+fn slot_label(st: &TileState, y: usize, x: usize) -> Option<u32> {
+    if st.vote_overflow[y][x] != 0 {
+        return None;
     }
     let mut best = (0u32, 0.0f32);
-    for (&l, &s) in lab[..used].iter().zip(&sum[..used]) {
-        if best.0 == 0 || s > best.1 || (s == best.1 && l < best.0) {
+    for slot in 0..VOTE_SLOTS {
+        let (l, s) = (st.vote_label[slot][y][x], st.vote_sum[slot][y][x]);
+        if l != 0 && (best.0 == 0 || s > best.1 || (s == best.1 && l < best.0)) {
             best = (l, s);
         }
     }
-    best.0
+    Some(best.0)
 }
 
-/// Each pixel's list (from the slot columns, or replayed past CAP): voted label, and its
-/// top-K copied into the band's store (front to back; heaviest first if asked).
+/// Copies each pixel's list (from the slot columns, or replayed past CAP) into the band's
+/// top-K store: all of it, front to back, when it fits in K (the usual case), else its K
+/// heaviest; heaviest first if the request asks for sorting.
 #[allow(clippy::too_many_arguments)]
-#[inline(never)]
-fn resolve_lists(
+#[inline(always)]
+fn resolve_top_k(
     ctx: &Ctx,
     scratch: &mut Scratch,
     band: &mut BandOut,
@@ -792,6 +747,7 @@ fn resolve_lists(
     let w = ctx.grid.width as usize;
     let st = &*scratch.st;
     let k = ctx.top_k.unwrap_or(usize::MAX);
+    let sort = ctx.sort_top_k;
     let (Some(start), Some(count), Some(store)) = (
         band.topk_start.as_deref_mut(),
         band.topk_count.as_deref_mut(),
@@ -799,28 +755,20 @@ fn resolve_lists(
     ) else {
         return;
     };
-    let mut vote_into = if ctx.vote {
-        band.labels.as_deref_mut()
-    } else {
-        None
-    };
-    // Labels by tile rank: L1-resident lookups in the vote.
-    let tile_labels = &mut scratch.tile_labels;
-    if vote_into.is_some() {
-        tile_labels.clear();
-        tile_labels.extend(list.iter().map(|&g| ctx.labels[g as usize]));
-    }
-    // One resize per tile for all its pixels' entries.
     let mut total = 0usize;
     for y in 0..rows {
         for x in 0..cols {
             total += (st.count[y][x] as usize).min(k);
         }
     }
-    let mut at = store.ids.len();
-    store.ids.resize(at + total, 0);
-    store.weights.resize(at + total, 0.0);
-    let (sids, sws) = (&*scratch.ids, &*scratch.ws);
+    // The store keeps last frame's length: grow only (no per-frame memset); the band
+    // truncates it to what it used when done.
+    let mut at = band.topk_len;
+    if store.ids.len() < at + total {
+        store.ids.resize(at + total, 0);
+        store.weights.resize(at + total, 0.0);
+    }
+    band.topk_len += total;
     for y in 0..rows {
         for x in 0..cols {
             let o = y * w + x0 + x;
@@ -831,78 +779,54 @@ fn resolve_lists(
             let dst_ids = &mut store.ids[at..at + m];
             let dst_ws = &mut store.weights[at..at + m];
             at += m;
-            let mut emit = |j: usize, r: u32, wt: f32| {
-                dst_ids[j] = list[r as usize];
-                dst_ws[j] = wt;
-            };
-            let sort = ctx.sort_top_k;
-            if n <= CAP {
-                let at_j = |j: usize| (sids[y][j][x], sws[y][j][x]);
-                if let Some(l) = vote_into.as_deref_mut() {
-                    l[o] = vote_ranks(n, at_j, tile_labels, &mut scratch.votes);
+            if n <= k && (!sort || n <= 1) {
+                // The usual case: the whole list, front to back, straight from the slots.
+                dst_ids.copy_from_slice(&scratch.ids[y][x][..n]);
+                dst_ws.copy_from_slice(&scratch.ws[y][x][..n]);
+            } else if n <= CAP {
+                let (ids, ws) = (&scratch.ids[y][x], &mut scratch.ws[y][x]);
+                let pos = &mut scratch.pos;
+                // Padding weights of −1 never outrank a real one.
+                let nn = n.div_ceil(16) * 16;
+                ws[n..nn].fill(-1.0);
+                macro_rules! rank_in {
+                    ($n:literal) => {
+                        weight_positions::<$n>(
+                            ws.first_chunk().expect("STRIDE ≥ CAP"),
+                            n,
+                            pos.first_chunk_mut().expect("CAP ≥ N"),
+                        )
+                    };
                 }
-                select_into(n, at_j, k, sort, &mut scratch.keys, &mut emit);
+                match nn {
+                    0..=16 => rank_in!(16),
+                    17..=32 => rank_in!(32),
+                    33..=64 => rank_in!(64),
+                    _ => rank_in!(128),
+                }
+                let mut j = 0;
+                for i in 0..n {
+                    let p = pos[i] as usize;
+                    if p < m {
+                        let d = if sort { p } else { j };
+                        dst_ids[d] = ids[i];
+                        dst_ws[d] = ws[i];
+                        j += 1;
+                    }
+                }
             } else {
                 let (px, py) = ((x0 + x) as u32, (band.band * T + y) as u32);
                 let replay = &mut scratch.replay;
                 replay_pixel(ctx.projected, list, px, py, replay);
-                let at_j = |j: usize| replay[j];
-                if let Some(l) = vote_into.as_deref_mut() {
-                    l[o] = vote_ranks(n, at_j, tile_labels, &mut scratch.votes);
+                let keys = &mut scratch.keys;
+                keys.clear();
+                keys.extend(replay.iter().enumerate().map(|(i, c)| topk_key(c.1, i as u32)));
+                for (j, &key) in select_top_k(keys, k, sort).iter().enumerate() {
+                    let (r, wt) = replay[key_rank(key) as usize];
+                    dst_ids[j] = list[r as usize];
+                    dst_ws[j] = wt;
                 }
-                select_into(n, at_j, k, sort, &mut scratch.keys, &mut emit);
             }
-        }
-    }
-}
-
-/// Emits the min(n, k) heaviest of a pixel's `n` contributions `at(j)` = (tile rank, weight)
-/// (front to back) as `emit(position, rank, weight)`: heaviest first if `sort`, else front
-/// to back.
-#[inline(always)]
-fn select_into(
-    n: usize,
-    at: impl Fn(usize) -> (u32, f32),
-    k: usize,
-    sort: bool,
-    keys: &mut Vec<u64>,
-    emit: &mut impl FnMut(usize, u32, f32),
-) {
-    let m = n.min(k);
-    if n <= k && (!sort || n <= 1) {
-        for j in 0..n {
-            let (r, wt) = at(j);
-            emit(j, r, wt);
-        }
-    } else if n <= SMALL_LIST {
-        // Short lists by branch-free ranking; weights padded with −1 never outrank.
-        let mut ws32 = [-1.0f32; SMALL_LIST];
-        let mut pos = [0u32; SMALL_LIST];
-        for (j, w) in ws32.iter_mut().enumerate().take(n) {
-            *w = at(j).1;
-        }
-        if n <= SMALL_LIST / 2 {
-            let (w16, p16) = (ws32.first_chunk::<16>(), pos.first_chunk_mut::<16>());
-            weight_positions(w16.expect("32 ≥ 16"), n, p16.expect("32 ≥ 16"));
-        } else {
-            weight_positions(&ws32, n, &mut pos);
-        }
-        let mut j = 0;
-        for (i, &p) in pos.iter().enumerate().take(n) {
-            let p = p as usize;
-            if p < m {
-                let (r, wt) = at(i);
-                emit(if sort { p } else { j }, r, wt);
-                j += 1;
-            }
-        }
-    } else {
-        keys.clear();
-        keys.extend((0..n).map(|j| topk_key(at(j).1, j as u32)));
-        let top = select_top_k(keys, k, sort);
-        for (j, &key) in top.iter().enumerate() {
-            let (r, wt) = at(key_rank(key) as usize);
-            emit(j, r, wt);
         }
     }
 }

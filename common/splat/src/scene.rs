@@ -140,16 +140,9 @@ pub fn indoor_scene(n: usize, seed: u64) -> GaussianMap {
             let b = normal.cross(&a);
             let rot = Rotation3::from_matrix_unchecked(Matrix3::from_columns(&[a, b, normal]));
             let q = UnitQuaternion::from_rotation_matrix(&rot);
-            let (slo, shi): (f32, f32) = match std::env::var("SCL").as_deref() {
-                Ok("a") => (0.02, 0.06),
-                Ok("b") => (0.02, 0.08),
-                Ok("c") => (0.03, 0.08),
-                Ok("d") => (0.015, 0.06),
-                _ => (0.01, 0.05),
-            };
             let scale = [
-                (rng.gen_range(slo.ln()..shi.ln())).exp(),
-                (rng.gen_range(slo.ln()..shi.ln())).exp(),
+                (rng.gen_range(0.01f32.ln()..0.05f32.ln())).exp(),
+                (rng.gen_range(0.01f32.ln()..0.05f32.ln())).exp(),
                 rng.gen_range(0.002..0.005),
             ];
             let jitter =
@@ -159,22 +152,7 @@ pub fn indoor_scene(n: usize, seed: u64) -> GaussianMap {
                 pos.into(),
                 [q.w, q.i, q.j, q.k],
                 scale,
-                {
-                    let u: f32 = rng.gen();
-                    match std::env::var("OPM").as_deref() {
-                        Ok("a") => 0.6 + 0.39 * u,
-                        Ok("b") => 0.99 - 0.69 * u * u,
-                        Ok("c") => 0.99 - 0.69 * u * u * u,
-                        Ok("d") => {
-                            if u < 0.8 {
-                                0.85 + 0.14 * (u / 0.8)
-                            } else {
-                                0.1 + 0.75 * ((u - 0.8) / 0.2)
-                            }
-                        }
-                        _ => 0.3 + 0.69 * u,
-                    }
-                },
+                rng.gen_range(0.3..0.99),
                 color,
                 patch.label,
             ));

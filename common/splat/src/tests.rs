@@ -342,3 +342,40 @@ fn top_k_of_a_long_list_matches_the_formula() {
         }
     }
 }
+
+#[test]
+fn portable_kernels_match_simd_kernels() {
+    // The SIMD builds (AVX2 / AVX-512) must be bit-identical to the portable one.
+    let k = Intrinsics::new(60.0, 62.0, 35.5, 25.0, 72, 52);
+    let pose = crate::scene::look_at([0.1, -0.2, -0.3], [0.0, 0.0, 2.0]);
+    let map = random_scene(600, 5);
+    let cam = Camera::from_pose(k, &pose, 0.1);
+    let only_labels = RenderRequest {
+        labels: true,
+        ..RenderRequest::default()
+    };
+    for req in [
+        RenderRequest::semantic(8),
+        RenderRequest::color_depth(),
+        only_labels,
+    ] {
+        let simd = render(&map, &cam, &req).output;
+        crate::rasterize::force_portable(true);
+        let portable = render(&map, &cam, &req).output;
+        crate::rasterize::force_portable(false);
+        assert_eq!(simd.color, portable.color);
+        assert_eq!(simd.depth, portable.depth);
+        assert_eq!(simd.final_transmittance, portable.final_transmittance);
+        assert_eq!(simd.n_contrib, portable.n_contrib);
+        assert_eq!(simd.labels, portable.labels);
+        let (a, b) = (simd.top_k.as_ref(), portable.top_k.as_ref());
+        assert_eq!(a.map(|t| t.entries()), b.map(|t| t.entries()));
+        if let (Some(a), Some(b)) = (a, b) {
+            for y in 0..k.height {
+                for x in 0..k.width {
+                    assert_eq!(a.pixel(x, y), b.pixel(x, y));
+                }
+            }
+        }
+    }
+}

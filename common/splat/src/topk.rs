@@ -34,22 +34,24 @@ pub fn select_top_k(keys: &mut [u64], k: usize, sort: bool) -> &[u64] {
     &keys[..k]
 }
 
-/// Lists up to this long are ordered by branch-free ranking instead of sorting.
-pub const SMALL_LIST: usize = 32;
-
 /// For each of the first `n` weights (front to back), its position when ordered by weight
-/// desc, ties to the front one. O(N²) compares, but branch-free and vectorised: for the
-/// ~16 contributions a pixel typically has, far cheaper than a comparison sort.
+/// desc, ties to the front one (lanes past `n` get garbage). O(n·N) compares, but
+/// branch-free with the N positions in vector lanes (one broadcast weight per step, no
+/// horizontal sums): for the few dozen contributions a pixel has, far cheaper than a sort.
 #[inline(always)]
 pub fn weight_positions<const N: usize>(ws: &[f32; N], n: usize, pos: &mut [u32; N]) {
-    for i in 0..n {
-        let wi = ws[i];
-        let mut r = 0u32;
-        for (j, &wj) in ws.iter().enumerate() {
-            r += ((wj > wi) | ((wj == wi) & (j < i))) as u32;
+    // u32 lane indices keep the tie test as wide as the weight compares.
+    let lane: [u32; N] = std::array::from_fn(|l| l as u32);
+    let mut r = [0u32; N];
+    for (j, &wj) in ws.iter().enumerate().take(n) {
+        let ju = j as u32;
+        for i in 0..N {
+            // j outranks i: heavier, or as heavy and in front.
+            let outranks = (wj > ws[i]) | ((wj == ws[i]) & (ju < lane[i]));
+            r[i] += outranks as u32;
         }
-        pos[i] = r;
     }
+    *pos = r;
 }
 
 /// Top-K lists of one band of 16 image rows.
@@ -96,10 +98,10 @@ mod tests {
 
     #[test]
     fn positions_match_sorting() {
-        let mut ws = [-1.0f32; SMALL_LIST];
+        let mut ws = [-1.0f32; 16];
         let vals = [0.1f32, 0.45, 0.1, 0.2, 0.3, 0.45];
         ws[..6].copy_from_slice(&vals);
-        let mut pos = [0u32; SMALL_LIST];
+        let mut pos = [0u32; 16];
         weight_positions(&ws, 6, &mut pos);
         assert_eq!(&pos[..6], &[4, 0, 5, 3, 2, 1]);
     }

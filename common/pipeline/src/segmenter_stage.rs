@@ -1,0 +1,110 @@
+//! The segmenter stage: the newest keyframe in (older ones dropped, so a slow
+//! segmenter never holds the pipeline back), a label map with confidences and
+//! the input Label-Class table out (METHOD §6).
+
+use std::path::PathBuf;
+
+use opengs_datasets::open_dataset;
+use opengs_geometry::Intrinsics;
+use opengs_ipc_schema::service::{KEYFRAMES, SEGMENTS};
+use opengs_ipc_schema::{now_ns, KeyframeHeader, MessageKind, SegmentLabel, SegmentsHeader, Stamp};
+use opengs_perception::{SamModelPaths, SegmenterInput, SegmenterKind, SegmenterOptions};
+use opengs_runtime::{waitset, CallbackProgression, Inlet, Outlet, RunContext, TelemetrySink, WaitSetRunResult};
+
+use crate::DatasetArgs;
+
+/// Options of the segmenter stage.
+#[derive(clap::Args, Debug, Clone)]
+pub struct SegmenterArgs {
+    /// classic (no weights), prior (ground truth), sam or mobilesamv2 (ONNX models).
+    #[arg(long, default_value = "classic")]
+    pub kind: String,
+    /// SAM-family image encoder ONNX (for sam / mobilesamv2).
+    #[arg(long)]
+    pub encoder: Option<PathBuf>,
+    /// SAM-family mask decoder ONNX (for sam / mobilesamv2).
+    #[arg(long)]
+    pub decoder: Option<PathBuf>,
+    #[command(flatten)]
+    pub dataset: DatasetArgs,
+}
+
+/// Runs the segmenter stage until a termination signal.
+pub fn run_segmenter(ctx: &RunContext, args: &SegmenterArgs) -> anyhow::Result<()> {
+    let kind: SegmenterKind = args.kind.parse()?;
+    let options = SegmenterOptions {
+        sam_models: match (&args.encoder, &args.decoder) {
+            (Some(e), Some(d)) => Some(SamModelPaths {
+                encoder: e.clone(),
+                decoder: d.clone(),
+            }),
+            _ => None,
+        },
+        ..SegmenterOptions::default()
+    };
+    let mut segmenter = kind.create_with(&options)?;
+    // Class names of ground-truth instances (the prior segmenter reports them).
+    let classes = open_dataset(&args.dataset.spec()?)?.class_table();
+    let kind_id = SegmenterKind::ALL.iter().position(|k| *k == kind).unwrap_or(0) as u32;
+    let node = ctx.node(&format!("segmenter_{}", std::process::id()))?;
+    let keyframes = Inlet::<KeyframeHeader>::new(ctx, &node, &KEYFRAMES)?;
+    let segments = Outlet::<SegmentsHeader>::new(ctx, &node, &SEGMENTS, 640 * 480 * 4 + 4096)?;
+    let telemetry = TelemetrySink::new(ctx, &node, "segmenter")?;
+    let ws = waitset()?;
+    let _guard = ws.attach_notification(keyframes.listener()).map_err(|e| anyhow::anyhow!("WaitSet: {e:?}"))?;
+    tracing::info!("segmenter '{}' ready", segmenter.name());
+    telemetry.ready();
+    loop {
+        match ws.wait_and_process_once(|_| CallbackProgression::Continue) {
+            Ok(WaitSetRunResult::TerminationRequest | WaitSetRunResult::Interrupt) => return Ok(()),
+            Err(e) => anyhow::bail!("WaitSet: {e:?}"),
+            Ok(_) => {}
+        }
+        keyframes.clear_wakeups();
+        let (newest, skipped) = keyframes.receive_newest()?;
+        let Some(sample) = newest else { continue };
+        let h = sample.user_header();
+        if skipped > 0 {
+            tracing::debug!("{skipped} older keyframes dropped");
+        }
+        let start = now_ns();
+        let view = match h.decode(sample.payload()) {
+            Ok(v) => v,
+            Err(e) => {
+                tracing::error!("keyframe #{} rejected: {e}", h.stamp.seq);
+                telemetry.dropped(&h.stamp);
+                continue;
+            }
+        };
+        let [fx, fy, cx, cy] = h.intrinsics;
+        let input = SegmenterInput {
+            width: h.width,
+            height: h.height,
+            rgb: view.rgb,
+            depth: view.depth,
+            depth_scale: h.depth_scale,
+            intrinsics: Intrinsics::new(fx, fy, cx, cy, h.width, h.height),
+            gt_labels: view.labels,
+            classes: &classes,
+        };
+        let seg = match segmenter.segment(&input) {
+            Ok(s) => s,
+            Err(e) => {
+                // A frame the segmenter cannot handle is skipped, not fatal.
+                tracing::error!("keyframe #{}: {e}", h.stamp.seq);
+                telemetry.dropped(&h.stamp);
+                continue;
+            }
+        };
+        let labels: Vec<SegmentLabel> = seg
+            .labels
+            .iter()
+            .map(|l| SegmentLabel::new(l.label, l.confidence, l.class.as_deref(), l.score))
+            .collect();
+        let mut stamp = Stamp::derived(MessageKind::Segments, &h.stamp);
+        stamp.stage_start_ns = start;
+        let header = SegmentsHeader::new(stamp, seg.width, seg.height, labels.len() as u32, kind_id);
+        segments.send(header, |hd, buf| hd.encode(&seg.label_map, &labels, buf))?;
+        telemetry.processed(&h.stamp, start, now_ns());
+    }
+}

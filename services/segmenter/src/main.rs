@@ -1,0 +1,36 @@
+//! Segmenter stage: label maps with confidences and classes for the newest keyframe.
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use clap::Parser;
+use opengs_pipeline::segmenter_stage::{run_segmenter, SegmenterArgs};
+use opengs_runtime::RunContext;
+
+#[derive(Parser)]
+#[command(about = "opengs segmenter stage (started by `opengs run`; swapped by `opengs ctl swap`)")]
+struct Args {
+    /// Run id that namespaces this run's shared-memory services.
+    #[arg(long)]
+    run_id: String,
+    /// Run directory (unused by the segmenter; every stage accepts it).
+    #[arg(long)]
+    out: Option<PathBuf>,
+    #[command(flatten)]
+    segmenter: SegmenterArgs,
+}
+
+fn main() -> ExitCode {
+    opengs_pipeline::logging::init("info");
+    let args = Args::parse();
+    let result = RunContext::new(&args.run_id)
+        .map_err(anyhow::Error::from)
+        .and_then(|ctx| run_segmenter(&ctx, &args.segmenter));
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("segmenter: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}
