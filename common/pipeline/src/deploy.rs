@@ -35,6 +35,11 @@ pub struct StageSpec {
     /// Restarts allowed before the run is abandoned.
     #[serde(default = "default_restart_limit")]
     pub restart_limit: u32,
+    /// Pass the run's dataset selection (`--dataset ...`) to this stage too.
+    #[serde(default)]
+    pub dataset: bool,
+    /// For swappable stages: the implementation to run (`--kind KIND`), changed by `opengs ctl swap`.
+    pub kind: Option<String>,
 }
 
 fn default_restart_limit() -> u32 {

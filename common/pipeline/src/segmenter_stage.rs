@@ -9,7 +9,9 @@ use opengs_geometry::Intrinsics;
 use opengs_ipc_schema::service::{KEYFRAMES, SEGMENTS};
 use opengs_ipc_schema::{now_ns, KeyframeHeader, MessageKind, SegmentLabel, SegmentsHeader, Stamp};
 use opengs_perception::{SamModelPaths, SegmenterInput, SegmenterKind, SegmenterOptions};
-use opengs_runtime::{waitset, CallbackProgression, Inlet, Outlet, RunContext, TelemetrySink, WaitSetRunResult};
+use opengs_runtime::{
+    waitset, CallbackProgression, Inlet, Outlet, RunContext, TelemetrySink, WaitSetRunResult,
+};
 
 use crate::DatasetArgs;
 
@@ -45,13 +47,18 @@ pub fn run_segmenter(ctx: &RunContext, args: &SegmenterArgs) -> anyhow::Result<(
     let mut segmenter = kind.create_with(&options)?;
     // Class names of ground-truth instances (the prior segmenter reports them).
     let classes = open_dataset(&args.dataset.spec()?)?.class_table();
-    let kind_id = SegmenterKind::ALL.iter().position(|k| *k == kind).unwrap_or(0) as u32;
+    let kind_id = SegmenterKind::ALL
+        .iter()
+        .position(|k| *k == kind)
+        .unwrap_or(0) as u32;
     let node = ctx.node(&format!("segmenter_{}", std::process::id()))?;
     let keyframes = Inlet::<KeyframeHeader>::new(ctx, &node, &KEYFRAMES)?;
     let segments = Outlet::<SegmentsHeader>::new(ctx, &node, &SEGMENTS, 640 * 480 * 4 + 4096)?;
     let telemetry = TelemetrySink::new(ctx, &node, "segmenter")?;
     let ws = waitset()?;
-    let _guard = ws.attach_notification(keyframes.listener()).map_err(|e| anyhow::anyhow!("WaitSet: {e:?}"))?;
+    let _guard = ws
+        .attach_notification(keyframes.listener())
+        .map_err(|e| anyhow::anyhow!("WaitSet: {e:?}"))?;
     tracing::info!("segmenter '{}' ready", segmenter.name());
     telemetry.ready();
     loop {
@@ -103,7 +110,8 @@ pub fn run_segmenter(ctx: &RunContext, args: &SegmenterArgs) -> anyhow::Result<(
             .collect();
         let mut stamp = Stamp::derived(MessageKind::Segments, &h.stamp);
         stamp.stage_start_ns = start;
-        let header = SegmentsHeader::new(stamp, seg.width, seg.height, labels.len() as u32, kind_id);
+        let header =
+            SegmentsHeader::new(stamp, seg.width, seg.height, labels.len() as u32, kind_id);
         segments.send(header, |hd, buf| hd.encode(&seg.label_map, &labels, buf))?;
         telemetry.processed(&h.stamp, start, now_ns());
     }

@@ -10,6 +10,8 @@ pub struct StageStatus {
     pub restarts: u32,
     pub processed: u64,
     pub last_seq: Option<u64>,
+    #[serde(default)]
+    pub kind: Option<String>,
 }
 
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
@@ -27,13 +29,14 @@ impl PipelineStatus {
             self.run_id, self.elapsed_s, self.out_dir
         );
         s.push_str(&format!(
-            "{:<12} {:>8} {:<11} {:>8} {:>10} {:>9}\n",
-            "stage", "pid", "state", "restarts", "processed", "last seq"
+            "{:<12} {:<12} {:>8} {:<11} {:>8} {:>10} {:>9}\n",
+            "stage", "kind", "pid", "state", "restarts", "processed", "last seq"
         ));
         for st in &self.stages {
             s.push_str(&format!(
-                "{:<12} {:>8} {:<11} {:>8} {:>10} {:>9}\n",
+                "{:<12} {:<12} {:>8} {:<11} {:>8} {:>10} {:>9}\n",
                 st.name,
+                st.kind.as_deref().unwrap_or("-"),
                 st.pid.map_or("-".into(), |p| p.to_string()),
                 st.state,
                 st.restarts,

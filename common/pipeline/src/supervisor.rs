@@ -174,6 +174,18 @@ struct RunState {
     end_of_data: Option<(u64, Instant)>,
     total_frames: Option<usize>,
     progress: Option<Progress>,
+    dataset_args: Vec<String>,
+    log_dir: PathBuf,
+    swap: Option<PendingSwap>,
+}
+
+/// A make-before-break swap in progress: the new process runs beside the old one until ready.
+struct PendingSwap {
+    index: usize,
+    process: StageProcess,
+    ready: bool,
+    request_id: u64,
+    started: Instant,
 }
 
 impl RunState {
@@ -207,11 +219,17 @@ impl RunState {
             end_of_data: None,
             total_frames,
             progress: opts.progress.then(|| Progress::new(total_frames)),
+            dataset_args: opts.dataset.to_args(),
+            log_dir,
+            swap: None,
         }
     }
 
     fn args_for(&self, i: usize) -> Vec<String> {
-        let s = &self.stages[i];
+        self.args_for_process(&self.stages[i])
+    }
+
+    fn args_for_process(&self, s: &StageProcess) -> Vec<String> {
         let mut a = vec![
             "--run-id".to_string(),
             self.run_id.clone(),
@@ -224,6 +242,12 @@ impl RunState {
             if let Some(seq) = s.last_seq {
                 a.extend(["--start-frame".to_string(), (seq + 1).to_string()]);
             }
+        }
+        if s.spec.dataset && s.spec.role != StageRole::Source {
+            a.extend(self.dataset_args.iter().cloned());
+        }
+        if let Some(kind) = &s.spec.kind {
+            a.extend(["--kind".to_string(), kind.clone()]);
         }
         if let Some(extra) = self.stage_args.get(&s.spec.name) {
             a.extend(extra.iter().cloned());
@@ -319,6 +343,7 @@ impl RunState {
             if self.handle_control(ch, started) {
                 return Ok(Ending::StopRequested);
             }
+            self.advance_swap(ch);
             if let Some(failed) = self.watch_children(ctx)? {
                 return Ok(Ending::StageFailed(failed));
             }
@@ -363,6 +388,11 @@ impl RunState {
                 }
             };
             let name = h.stage_name().to_string();
+            if let Some(swap) = &mut self.swap {
+                if event == TelemetryEvent::Ready && swap.process.pid() == Some(h.pid) {
+                    swap.ready = true;
+                }
+            }
             let Some(i) = self.stage_index(&name) else {
                 continue;
             };
@@ -435,13 +465,11 @@ impl RunState {
                     stop = true;
                     (true, "\"stopping\"".to_string())
                 }
-                ControlCommand::Swap => (
-                    false,
-                    format!(
-                        "\"swap '{}': no stage of this pipeline has swappable kinds\"",
-                        view.text
-                    ),
-                ),
+                ControlCommand::Swap => match self.begin_swap(view.text, view.request_id) {
+                    // The reply goes out when the new process is ready (or fails).
+                    Ok(()) => continue,
+                    Err(e) => (false, serde_json::Value::String(e).to_string()),
+                },
                 ControlCommand::Reply => continue,
             };
             let reply = ControlHeader::new(ControlCommand::Reply, view.request_id, ok, &text);
@@ -450,6 +478,96 @@ impl RunState {
             }
         }
         stop
+    }
+
+    /// Starts the replacement process of a `swap STAGE KIND` request.
+    fn begin_swap(&mut self, text: &str, request_id: u64) -> Result<(), String> {
+        let mut words = text.split_whitespace();
+        let (Some(stage), Some(kind), None) = (words.next(), words.next(), words.next()) else {
+            return Err(format!("swap needs 'STAGE KIND', got '{text}'"));
+        };
+        if self.swap.is_some() {
+            return Err("a swap is already in progress".into());
+        }
+        let index = self
+            .stage_index(stage)
+            .ok_or_else(|| format!("no stage '{stage}' in this pipeline"))?;
+        let current = &self.stages[index];
+        if current.spec.kind.is_none() {
+            return Err(format!("stage '{stage}' has no kinds to swap"));
+        }
+        if current.spec.kind.as_deref() == Some(kind) {
+            return Err(format!("stage '{stage}' already runs '{kind}'"));
+        }
+        let mut spec = current.spec.clone();
+        spec.kind = Some(kind.to_string());
+        let mut process = StageProcess::new(spec, &self.log_dir);
+        let args = self.args_for_process(&process);
+        process.spawn(&args).map_err(|e| e.to_string())?;
+        self.note(&format!(
+            "swap {stage}: starting '{kind}' (pid {}) beside the running one",
+            process.pid().unwrap_or(0)
+        ));
+        self.swap = Some(PendingSwap {
+            index,
+            process,
+            ready: false,
+            request_id,
+            started: Instant::now(),
+        });
+        Ok(())
+    }
+
+    /// Completes (new process ready: stop the old one) or abandons a pending swap.
+    fn advance_swap(&mut self, ch: &Channels) {
+        let Some(swap) = &mut self.swap else { return };
+        let failed = if let Some(status) = swap.process.poll_exit() {
+            Some(format!(
+                "the new process exited ({status}); see {}",
+                swap.process.log_path().display()
+            ))
+        } else if !swap.ready
+            && swap.started.elapsed().as_secs_f64() > self.deploy.startup_timeout_s
+        {
+            Some(format!(
+                "the new process was not ready within {} s",
+                self.deploy.startup_timeout_s
+            ))
+        } else {
+            None
+        };
+        let (ok, text) = match failed {
+            Some(why) => (false, why),
+            None if swap.ready => (true, String::new()),
+            None => return,
+        };
+        let Some(mut swap) = self.swap.take() else {
+            return;
+        };
+        let text = if ok {
+            let old = &mut self.stages[swap.index];
+            let from = old.spec.kind.clone().unwrap_or_default();
+            old.stop(Duration::from_secs(5));
+            // The stage keeps its history; only the process and kind change.
+            swap.process.restarts = old.restarts;
+            swap.process.processed = old.processed;
+            swap.process.last_seq = old.last_seq;
+            swap.process.state = StageState::Ready;
+            let to = swap.process.spec.kind.clone().unwrap_or_default();
+            let name = swap.process.spec.name.clone();
+            self.stages[swap.index] = swap.process;
+            self.note(&format!("swap {name}: '{from}' → '{to}' done"));
+            format!("swapped {name} from {from} to {to}")
+        } else {
+            swap.process.stop(Duration::from_secs(1));
+            self.note(&format!("swap failed: {text}"));
+            text
+        };
+        let body = serde_json::Value::String(text).to_string();
+        let reply = ControlHeader::new(ControlCommand::Reply, swap.request_id, ok, &body);
+        if let Err(e) = ch.replies.send(reply, |h, buf| h.encode(&body, buf)) {
+            tracing::warn!("control reply: {e}");
+        }
     }
 
     fn status(&self, started: Instant) -> PipelineStatus {
@@ -470,6 +588,7 @@ impl RunState {
                     restarts: s.restarts,
                     processed: s.processed,
                     last_seq: s.last_seq,
+                    kind: s.spec.kind.clone(),
                 })
                 .collect(),
         }
@@ -522,6 +641,9 @@ impl RunState {
 
     /// Stops every running stage, the source first.
     fn stop_all(&mut self) {
+        if let Some(mut swap) = self.swap.take() {
+            swap.process.stop(Duration::from_secs(1));
+        }
         let order: Vec<usize> = (0..self.stages.len()).rev().collect();
         for i in order {
             if self.stages[i].is_running() {

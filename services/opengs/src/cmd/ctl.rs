@@ -29,6 +29,15 @@ enum CtlWhat {
     },
     /// Stop the pipeline cleanly (as Ctrl-C would); outputs are written.
     Stop,
+    /// Replace a stage's implementation while the pipeline runs (make-before-break):
+    /// the new process starts, and the old one stops once the new one is ready.
+    Swap {
+        /// The stage to swap, e.g. `segmenter`.
+        stage: String,
+        /// The new kind, e.g. `classic`, `prior`, `sam`, `mobilesamv2`.
+        #[arg(long)]
+        to: String,
+    },
 }
 
 pub fn run(args: CtlArgs) -> anyhow::Result<()> {
@@ -54,11 +63,13 @@ pub fn run(args: CtlArgs) -> anyhow::Result<()> {
             ),
         },
     };
-    let (command, text) = match &args.what {
-        CtlWhat::Status { .. } => (ControlCommand::Status, String::new()),
-        CtlWhat::Stop => (ControlCommand::Stop, String::new()),
+    let (command, text, wait) = match &args.what {
+        CtlWhat::Status { .. } => (ControlCommand::Status, String::new(), 3),
+        CtlWhat::Stop => (ControlCommand::Stop, String::new(), 3),
+        // A model-based segmenter may take a while to load its weights.
+        CtlWhat::Swap { stage, to } => (ControlCommand::Swap, format!("{stage} {to}"), 120),
     };
-    let reply = request(&run.run_id, command, &text)?;
+    let reply = request(&run.run_id, command, &text, Duration::from_secs(wait))?;
     match args.what {
         CtlWhat::Status { json: true } => println!("{reply}"),
         CtlWhat::Status { json: false } => {
@@ -70,12 +81,21 @@ pub fn run(args: CtlArgs) -> anyhow::Result<()> {
             run.run_id,
             run.out_dir.display()
         ),
+        CtlWhat::Swap { .. } => println!(
+            "{}",
+            serde_json::from_str::<String>(&reply).unwrap_or(reply)
+        ),
     }
     Ok(())
 }
 
-/// Sends one control request and waits (3 s) for the matching reply.
-fn request(run_id: &str, command: ControlCommand, text: &str) -> anyhow::Result<String> {
+/// Sends one control request and waits up to `wait` for the matching reply.
+fn request(
+    run_id: &str,
+    command: ControlCommand,
+    text: &str,
+    wait: Duration,
+) -> anyhow::Result<String> {
     let ctx = RunContext::new(run_id)?;
     let node = ctx.node(&format!("ctl_{}", std::process::id()))?;
     let replies = Inlet::<ControlHeader>::new(&ctx, &node, &CONTROL_REPLIES)?;
@@ -85,7 +105,7 @@ fn request(run_id: &str, command: ControlCommand, text: &str) -> anyhow::Result<
     requests.send(header, |h, buf| h.encode(text, buf))?;
     let ws = waitset()?;
     let _guard = ws
-        .attach_deadline(replies.listener(), Duration::from_secs(3))
+        .attach_deadline(replies.listener(), wait)
         .map_err(|e| anyhow::anyhow!("{e:?}"))?;
     let started = std::time::Instant::now();
     while started.elapsed() < Duration::from_secs(3) {
@@ -110,5 +130,5 @@ fn request(run_id: &str, command: ControlCommand, text: &str) -> anyhow::Result<
             }
         }
     }
-    anyhow::bail!("run {run_id} did not answer within 3 s")
+    anyhow::bail!("run {run_id} did not answer within {} s", wait.as_secs())
 }

@@ -18,6 +18,9 @@ pub struct RunArgs {
     /// Sensor rate cap in frames/s (default: the dataset's rate; 0 = as fast as possible).
     #[arg(long)]
     pub max_rate: Option<f64>,
+    /// Segmenter to start with: classic (no weights), prior (ground truth), sam, mobilesamv2.
+    #[arg(long)]
+    pub segmenter: Option<String>,
     /// Start tracking at the ground-truth first pose instead of the identity.
     #[arg(long)]
     pub gt_first_pose: bool,
@@ -30,7 +33,20 @@ pub struct RunArgs {
 }
 
 pub fn run(args: RunArgs) -> anyhow::Result<()> {
-    let deploy = DeployFile::load(&args.deploy)?;
+    let mut deploy = DeployFile::load(&args.deploy)?;
+    if let Some(kind) = &args.segmenter {
+        let stage = deploy
+            .stages
+            .iter_mut()
+            .find(|s| s.name == "segmenter")
+            .ok_or_else(|| {
+                anyhow::anyhow!(
+                    "--segmenter: deploy file {} has no segmenter stage",
+                    args.deploy.display()
+                )
+            })?;
+        stage.kind = Some(kind.clone());
+    }
     // Validate the dataset here so a typo fails before any process starts.
     let spec = args.dataset.spec()?;
     opengs_datasets::open_dataset(&spec)?;

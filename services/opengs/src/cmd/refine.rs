@@ -1,0 +1,299 @@
+//! `opengs refine RUN_DIR`: keep optimising a finished run's map offline on its keyframes,
+//! and report render quality (PSNR / SSIM, METHOD §9) before and after.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::Context;
+use indicatif::{ProgressBar, ProgressStyle};
+use opengs_datasets::open_dataset;
+use opengs_eval::read_tum_trajectory;
+use opengs_pipeline::DatasetArgs;
+use opengs_quality::{
+    evaluate_dataset_quality, load_posed_frames, merge_metrics_json, refine, write_quality_metrics,
+    QualityReport, RefineConfig,
+};
+use opengs_splat::{read_ply_file, write_ply_file};
+
+#[derive(Debug, clap::Args)]
+pub struct RefineArgs {
+    /// A run directory written by `opengs run` (map.ply, trajectory.txt, run.json).
+    pub run_dir: PathBuf,
+    /// Optimisation steps.
+    #[arg(long, default_value_t = 1000)]
+    pub iters: usize,
+    /// Train on every Nth trajectory frame [default: 5].
+    #[arg(long)]
+    pub every: Option<usize>,
+    /// Evaluate PSNR / SSIM on every Nth trajectory frame.
+    #[arg(long, default_value_t = 5)]
+    pub eval_every: usize,
+    /// Keep at most this many keyframes in memory (`--every` is raised to fit).
+    #[arg(long, default_value_t = 300)]
+    pub max_keyframes: usize,
+    /// Optimise at full resolution (default: half, as the online mapper does).
+    #[arg(long)]
+    pub full_resolution: bool,
+    /// Seed of the keyframe order.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Smallest scene extent (m) for the position learning rate and size pruning; the
+    /// extent is otherwise 1.1 × the radius of the keyframe camera centres.
+    #[arg(long, default_value_t = 1.0)]
+    pub min_scene_extent: f32,
+    /// Map to refine [default: RUN_DIR/map.ply].
+    #[arg(long)]
+    pub map: Option<PathBuf>,
+    /// Dataset (`synthetic`, `tum:DIR`, `replica:DIR`) when run.json does not name it.
+    #[arg(long)]
+    pub dataset: Option<String>,
+}
+
+pub fn run(args: RefineArgs) -> anyhow::Result<()> {
+    let dir = &args.run_dir;
+    anyhow::ensure!(
+        dir.is_dir(),
+        "{}: not a run directory (expected the output directory of `opengs run`)",
+        dir.display()
+    );
+    anyhow::ensure!(args.iters > 0, "--iters must be at least 1");
+    anyhow::ensure!(
+        args.min_scene_extent.is_finite() && args.min_scene_extent > 0.0,
+        "--min-scene-extent must be a positive distance, got {}",
+        args.min_scene_extent
+    );
+    let dataset = dataset_args(dir, args.dataset.as_deref())?;
+    let map_path = args.map.clone().unwrap_or_else(|| dir.join("map.ply"));
+    let mut map =
+        read_ply_file(&map_path).with_context(|| format!("reading {}", map_path.display()))?;
+    anyhow::ensure!(!map.is_empty(), "{}: the map is empty", map_path.display());
+    let trajectory = read_tum_trajectory(&dir.join("trajectory.txt"))?;
+    anyhow::ensure!(
+        !trajectory.is_empty(),
+        "{}: no poses",
+        dir.join("trajectory.txt").display()
+    );
+    let spec = dataset.spec()?;
+    let mut source =
+        open_dataset(&spec).with_context(|| format!("opening dataset '{}'", dataset.dataset))?;
+    let intrinsics = source.intrinsics();
+
+    println!(
+        "map {} ({} Gaussians), {} poses, dataset {}",
+        map_path.display(),
+        map.len(),
+        trajectory.len(),
+        source.name()
+    );
+    let before = evaluate_dataset_quality(
+        &map,
+        source.as_mut(),
+        &trajectory,
+        args.eval_every,
+        Some(&dir.join("renders")),
+    )
+    .context("evaluating the map before refinement")?;
+    print_quality("before", &before);
+
+    let every = keyframe_stride(
+        trajectory.len(),
+        args.every.unwrap_or(5),
+        args.max_keyframes,
+    );
+    let (keyframes, unmatched) =
+        load_posed_frames(source.as_mut(), &trajectory, every).context("loading keyframes")?;
+    if unmatched > 0 {
+        eprintln!("{unmatched} trajectory poses match no dataset frame within 1 ms; skipped");
+    }
+    println!(
+        "refining on {} keyframes (one pose in {every}), {} iterations at {} resolution",
+        keyframes.len(),
+        args.iters,
+        if args.full_resolution { "full" } else { "half" }
+    );
+    let config = RefineConfig {
+        iters: args.iters,
+        downscale: !args.full_resolution,
+        seed: args.seed,
+        min_scene_extent: args.min_scene_extent,
+        ..RefineConfig::default()
+    };
+    let bar = progress_bar(args.iters)?;
+    let stats = refine(&mut map, &keyframes, intrinsics, &config, |i, loss| {
+        bar.set_position(i as u64);
+        if i % 10 == 0 {
+            bar.set_message(format!("loss {loss:.4}"));
+        }
+    })
+    .context("refining")?;
+    bar.finish_and_clear();
+    println!(
+        "refined in {:.1} s: loss {:.4} → {:.4}, scene extent {:.2} m, {} → {} Gaussians",
+        stats.seconds,
+        stats.first_loss,
+        stats.last_loss,
+        stats.scene_extent,
+        stats.gaussians_before,
+        stats.gaussians_after
+    );
+    drop(keyframes);
+
+    let after = evaluate_dataset_quality(
+        &map,
+        source.as_mut(),
+        &trajectory,
+        args.eval_every,
+        Some(&dir.join("renders_refined")),
+    )
+    .context("evaluating the refined map")?;
+    print_quality("after", &after);
+
+    let out = dir.join("map_refined.ply");
+    write_ply_file(&map, &out).with_context(|| format!("writing {}", out.display()))?;
+    write_quality_metrics(dir, &after, "_refined")?;
+    let mut extra = serde_json::Map::new();
+    extra.insert("refine_iters".into(), args.iters.into());
+    extra.insert("refine_keyframes".into(), stats.keyframes.into());
+    // The unrefined map scored on the same frames, so before/after compare like for like.
+    extra.insert("psnr_db_before_refine".into(), before.psnr_db.into());
+    extra.insert("ssim_before_refine".into(), before.ssim.into());
+    merge_metrics_json(&dir.join("metrics.json"), extra)?;
+    println!(
+        "PSNR {:.2} → {:.2} dB, SSIM {:.4} → {:.4}",
+        before.psnr_db, after.psnr_db, before.ssim, after.ssim
+    );
+    println!("wrote {}", out.display());
+    println!("wrote {}", dir.join("metrics.json").display());
+    for p in before.pngs.iter().chain(&after.pngs) {
+        println!("wrote {}", p.display());
+    }
+    Ok(())
+}
+
+/// The run's dataset selection: run.json's `dataset_args`, or `--dataset` when given.
+fn dataset_args(run_dir: &Path, dataset_override: Option<&str>) -> anyhow::Result<DatasetArgs> {
+    let path = run_dir.join("run.json");
+    let saved = match std::fs::read_to_string(&path) {
+        Ok(text) => {
+            let json: serde_json::Value = serde_json::from_str(&text)
+                .with_context(|| format!("{}: invalid JSON", path.display()))?;
+            json.get("dataset_args")
+                .map(|v| parse_dataset_args(v).with_context(|| format!("{}", path.display())))
+                .transpose()?
+        }
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => None,
+        Err(e) => return Err(anyhow::Error::new(e).context(format!("reading {}", path.display()))),
+    };
+    match (saved, dataset_override) {
+        (Some(mut a), Some(d)) => {
+            a.dataset = d.to_string();
+            Ok(a)
+        }
+        (Some(a), None) => Ok(a),
+        (None, Some(d)) => Ok(DatasetArgs {
+            dataset: d.to_string(),
+            ..DatasetArgs::default()
+        }),
+        (None, None) => anyhow::bail!(
+            "{}: no \"dataset_args\" (a run from an older `opengs run`?); \
+             pass --dataset synthetic|tum:DIR|replica:DIR",
+            path.display()
+        ),
+    }
+}
+
+/// `{"dataset": "...", "frames": N|null, "trajectory": "..."|null, "seed": N, "noise": bool}`;
+/// only `dataset` is required.
+fn parse_dataset_args(v: &serde_json::Value) -> anyhow::Result<DatasetArgs> {
+    let field = |name: &str| v.get(name).filter(|x| !x.is_null());
+    let dataset = field("dataset")
+        .and_then(|x| x.as_str())
+        .context("\"dataset_args.dataset\" must be a string")?
+        .to_string();
+    let frames = match field("frames") {
+        None => None,
+        Some(x) => Some(
+            x.as_u64()
+                .context("\"dataset_args.frames\" must be a count")? as usize,
+        ),
+    };
+    let trajectory = match field("trajectory") {
+        None => None,
+        Some(x) => Some(PathBuf::from(
+            x.as_str()
+                .context("\"dataset_args.trajectory\" must be a path")?,
+        )),
+    };
+    let seed = match field("seed") {
+        None => 0,
+        Some(x) => x
+            .as_u64()
+            .context("\"dataset_args.seed\" must be an integer")?,
+    };
+    let noise = match field("noise") {
+        None => false,
+        Some(x) => x
+            .as_bool()
+            .context("\"dataset_args.noise\" must be true or false")?,
+    };
+    Ok(DatasetArgs {
+        dataset,
+        frames,
+        trajectory,
+        seed,
+        noise,
+    })
+}
+
+/// `every`, raised so that at most `max_keyframes` of `poses` are used.
+fn keyframe_stride(poses: usize, every: usize, max_keyframes: usize) -> usize {
+    every.max(1).max(poses.div_ceil(max_keyframes.max(1)))
+}
+
+fn progress_bar(iters: usize) -> anyhow::Result<ProgressBar> {
+    let bar = ProgressBar::new(iters as u64);
+    bar.set_style(
+        ProgressStyle::with_template(
+            "refine [{bar:40}] {pos}/{len} its ({per_sec}, eta {eta}) {msg}",
+        )
+        .context("progress bar template")?
+        .progress_chars("=> "),
+    );
+    Ok(bar)
+}
+
+fn print_quality(when: &str, r: &QualityReport) {
+    println!(
+        "{when}: PSNR {:.2} dB, SSIM {:.4} over {} frames (pixels without depth masked)",
+        r.psnr_db, r.ssim, r.frames_evaluated
+    );
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn dataset_args_parse_defensively() {
+        let v = serde_json::json!({"dataset": "tum:/d", "frames": 30, "seed": 2, "noise": true});
+        let a = parse_dataset_args(&v).expect("valid");
+        assert_eq!(
+            (a.dataset.as_str(), a.frames, a.seed, a.noise),
+            ("tum:/d", Some(30), 2, true)
+        );
+        let a = parse_dataset_args(&serde_json::json!({"dataset": "synthetic", "frames": null}))
+            .expect("valid");
+        assert_eq!(
+            (a.frames, a.trajectory, a.seed, a.noise),
+            (None, None, 0, false)
+        );
+        let e = parse_dataset_args(&serde_json::json!({"frames": 3})).expect_err("no dataset");
+        assert!(e.to_string().contains("dataset_args.dataset"), "{e}");
+    }
+
+    #[test]
+    fn stride_respects_the_keyframe_cap() {
+        assert_eq!(keyframe_stride(600, 5, 300), 5);
+        assert_eq!(keyframe_stride(2000, 5, 300), 7);
+        assert_eq!(keyframe_stride(10, 0, 300), 1);
+    }
+}
