@@ -5,7 +5,7 @@ use std::path::PathBuf;
 use opengs_datasets::{DatasetKind, DatasetSpec, DepthNoise};
 
 /// Which dataset to stream and how.
-#[derive(clap::Args, Debug, Clone, Default)]
+#[derive(clap::Args, Debug, Clone, Default, serde::Serialize, serde::Deserialize)]
 pub struct DatasetArgs {
     /// `synthetic` (the embedded room), `tum:DIR` or `replica:DIR`.
     #[arg(long, default_value = "synthetic")]

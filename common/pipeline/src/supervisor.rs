@@ -175,6 +175,7 @@ struct RunState {
     total_frames: Option<usize>,
     progress: Option<Progress>,
     dataset_args: Vec<String>,
+    dataset: DatasetArgs,
     log_dir: PathBuf,
     swap: Option<PendingSwap>,
 }
@@ -220,6 +221,7 @@ impl RunState {
             total_frames,
             progress: opts.progress.then(|| Progress::new(total_frames)),
             dataset_args: opts.dataset.to_args(),
+            dataset: opts.dataset.clone(),
             log_dir,
             swap: None,
         }
@@ -668,6 +670,7 @@ impl RunState {
         self.trace.write(&dir.join("trace.json"))?;
         let status = serde_json::json!({
             "run_id": self.run_id,
+            "dataset_args": self.dataset,
             "frames_total": self.total_frames,
             "stages": self.stages.iter().map(|s| serde_json::json!({
                 "name": s.spec.name, "restarts": s.restarts, "processed": s.processed, "last_seq": s.last_seq,

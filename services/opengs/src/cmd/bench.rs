@@ -16,6 +16,24 @@ enum BenchWhat {
     Render(super::bench_render::BenchRenderArgs),
     /// G-ICP registration time and tracker throughput.
     Gicp(super::bench_gicp::BenchGicpArgs),
+    /// One mapping step (forward + backward + Adam) with 100k Gaussians at 640×480 and 320×240.
+    Map {
+        /// Timed steps per case.
+        #[arg(long, default_value_t = 15)]
+        steps: usize,
+        /// Gaussians in the scene.
+        #[arg(long, default_value_t = 100_000)]
+        gaussians: usize,
+    },
+    /// Segmenters (classic, prior) per 640×480 synthetic frame.
+    Segment {
+        /// Frames to segment.
+        #[arg(long, default_value_t = 8)]
+        frames: usize,
+        /// Repeats per frame.
+        #[arg(long, default_value_t = 3)]
+        repeats: usize,
+    },
 }
 
 pub fn run(args: BenchArgs) -> anyhow::Result<()> {
@@ -23,5 +41,22 @@ pub fn run(args: BenchArgs) -> anyhow::Result<()> {
         BenchWhat::Ipc(a) => super::bench_ipc::run(a),
         BenchWhat::Render(a) => super::bench_render::run(a),
         BenchWhat::Gicp(a) => super::bench_gicp::run(a),
+        BenchWhat::Map { steps, gaussians } => {
+            let load = std::fs::read_to_string("/proc/loadavg").unwrap_or_default();
+            println!(
+                "mapping step ({steps} timed steps per case, medians; loadavg {})",
+                load.trim()
+            );
+            for (w, h) in [(640, 480), (320, 240)] {
+                println!(
+                    "{}",
+                    opengs_splat::bench_train_steps(gaussians, w, h, steps)
+                );
+            }
+            Ok(())
+        }
+        BenchWhat::Segment { frames, repeats } => Ok(
+            opengs_perception::bench::print_segment_bench(frames, repeats)?,
+        ),
     }
 }
