@@ -84,7 +84,11 @@ impl KeyframeHeader {
     fn layout_len(&self) -> usize {
         let n = self.width as usize * self.height as usize;
         let p = self.point_count as usize;
-        let labels = if self.has_labels() { section_len::<u16>(n) } else { 0 };
+        let labels = if self.has_labels() {
+            section_len::<u16>(n)
+        } else {
+            0
+        };
         section_len::<[f32; 3]>(p)
             + section_len::<[f32; 6]>(p)
             + section_len::<u16>(n)
@@ -154,7 +158,11 @@ impl KeyframeHeader {
             points: r.take(p)?,
             covariances: r.take(p)?,
             depth: r.take(n)?,
-            labels: if self.has_labels() { Some(r.take(n)?) } else { None },
+            labels: if self.has_labels() {
+                Some(r.take(n)?)
+            } else {
+                None
+            },
             rgb: r.take(3 * n)?,
         })
     }

@@ -215,7 +215,10 @@ fn keyframe_round_trip_and_rejects() {
     assert_eq!(v.rgb, &rgb[..]);
     let mut bad = hdr;
     bad.flags = 0; // claims no labels plane, but one is there
-    assert!(matches!(bad.decode(payload), Err(SchemaError::LayoutMismatch { .. })));
+    assert!(matches!(
+        bad.decode(payload),
+        Err(SchemaError::LayoutMismatch { .. })
+    ));
     let mut bad = hdr;
     bad.flags = 6;
     assert!(matches!(bad.decode(payload), Err(SchemaError::Invalid(_))));

@@ -2,6 +2,14 @@
 //! binaries, and the frame checksum the probe process and the tests share.
 
 use std::path::PathBuf;
+use std::sync::{Mutex, MutexGuard};
+
+/// One pipeline at a time: the tests of a file run in parallel threads, and two
+/// real-time pipelines on a 2-core machine would starve each other's trackers.
+pub fn serial() -> MutexGuard<'static, ()> {
+    static LOCK: Mutex<()> = Mutex::new(());
+    LOCK.lock().unwrap_or_else(|poisoned| poisoned.into_inner())
+}
 
 /// FNV-1a over a frame's planes: cheap, and any flipped byte changes it.
 pub fn frame_checksum(depth: &[u16], rgb: &[u8]) -> u64 {
@@ -37,4 +45,31 @@ pub fn binary(name: &str) -> PathBuf {
         path.display()
     );
     path
+}
+
+/// `opengs ctl --run ID status --json`, parsed; `None` while the run does not answer yet.
+pub fn ctl_status(run_id: &str) -> Option<serde_json::Value> {
+    let out = std::process::Command::new(binary("opengs"))
+        .args(["ctl", "--run", run_id, "status", "--json"])
+        .output()
+        .ok()?;
+    serde_json::from_slice(&out.stdout).ok()
+}
+
+/// The pid of a stage of a running pipeline, from `ctl status`.
+pub fn stage_pid(run_id: &str, stage: &str) -> Option<i32> {
+    let st = ctl_status(run_id)?;
+    let stages = st["stages"].as_array()?;
+    let s = stages.iter().find(|s| s["name"] == stage)?;
+    s["pid"].as_u64().map(|p| p as i32)
+}
+
+/// Kills a child on drop, so a failing assertion leaves no process behind.
+pub struct Guard(pub std::process::Child);
+
+impl Drop for Guard {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
 }

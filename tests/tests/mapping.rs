@@ -3,18 +3,11 @@
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-use opengs_e2e::binary;
-
-fn ctl_status(run_id: &str) -> Option<serde_json::Value> {
-    let out = Command::new(binary("opengs"))
-        .args(["ctl", "--run", run_id, "status", "--json"])
-        .output()
-        .ok()?;
-    serde_json::from_slice(&out.stdout).ok()
-}
+use opengs_e2e::{binary, serial, stage_pid};
 
 #[test]
 fn killed_mapper_resumes_from_its_checkpoint() {
+    let _serial = serial();
     let dir = tempfile::tempdir().expect("tmp");
     let deploy = dir.path().join("deploy.toml");
     std::fs::write(
@@ -65,13 +58,8 @@ role = "source"
     }
     let pid = loop {
         assert!(Instant::now() < deadline, "no mapper pid");
-        if let Some(p) = ctl_status(&run_id).and_then(|st| {
-            st["stages"]
-                .as_array()
-                .and_then(|a| a.iter().find(|s| s["name"] == "mapper"))
-                .and_then(|s| s["pid"].as_u64())
-        }) {
-            break p as i32;
+        if let Some(p) = stage_pid(&run_id, "mapper") {
+            break p;
         }
         std::thread::sleep(Duration::from_millis(100));
     };

@@ -2,24 +2,14 @@
 
 use std::io::{BufRead, BufReader};
 use std::path::Path;
-use std::process::{Child, Command, Stdio};
+use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 use opengs_datasets::{open_dataset, DatasetSpec};
-use opengs_e2e::{binary, frame_checksum};
+use opengs_e2e::{binary, ctl_status, frame_checksum, serial, Guard};
 
 fn unique_run_id(tag: &str) -> String {
     format!("t{}-{tag}", std::process::id())
-}
-
-/// Kills a child on drop, so a failing assertion leaves no process behind.
-struct Guard(Child);
-
-impl Drop for Guard {
-    fn drop(&mut self) {
-        let _ = self.0.kill();
-        let _ = self.0.wait();
-    }
 }
 
 fn expected_checksums(frames: usize) -> Vec<u64> {
@@ -35,6 +25,7 @@ fn expected_checksums(frames: usize) -> Vec<u64> {
 
 #[test]
 fn every_frame_arrives_intact_and_in_order() {
+    let _serial = serial();
     const N: usize = 45;
     let run_id = unique_run_id("intact");
     let mut probe = Guard(
@@ -109,16 +100,9 @@ restart_limit = 2
     path
 }
 
-fn ctl_status(run_id: &str) -> Option<serde_json::Value> {
-    let out = Command::new(binary("opengs"))
-        .args(["ctl", "--run", run_id, "status", "--json"])
-        .output()
-        .ok()?;
-    serde_json::from_slice(&out.stdout).ok()
-}
-
 #[test]
 fn supervisor_restarts_a_killed_stage_and_the_run_finishes_clean() {
+    let _serial = serial();
     const N: usize = 120;
     let dir = tempfile::tempdir().expect("tmp");
     let deploy = write_deploy(dir.path());
@@ -204,6 +188,7 @@ fn supervisor_restarts_a_killed_stage_and_the_run_finishes_clean() {
 
 #[test]
 fn ctrl_c_stops_the_run_and_keeps_outputs() {
+    let _serial = serial();
     let dir = tempfile::tempdir().expect("tmp");
     let deploy = write_deploy(dir.path());
     let run_id = unique_run_id("sigint");
@@ -282,6 +267,7 @@ fn affinity_and_nice(pid: u64) -> (String, i64) {
 
 #[test]
 fn edge_deploy_pins_and_nices_stages() {
+    let _serial = serial();
     if std::thread::available_parallelism().map_or(1, |n| n.get()) < 2 {
         eprintln!("skipped: the edge deploy pins to cpus 0 and 1");
         return;

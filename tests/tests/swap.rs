@@ -3,7 +3,7 @@
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-use opengs_e2e::binary;
+use opengs_e2e::{binary, serial};
 
 fn swap(run_id: &str, to: &str) {
     let out = Command::new(binary("opengs"))
@@ -29,6 +29,7 @@ fn segments_seen(log: &std::path::Path) -> usize {
 
 #[test]
 fn segmenter_swaps_mid_run_without_a_gap() {
+    let _serial = serial();
     let dir = tempfile::tempdir().expect("tmp");
     let deploy = dir.path().join("deploy.toml");
     std::fs::write(

@@ -3,7 +3,7 @@
 use std::path::PathBuf;
 use std::process::Command;
 
-use opengs_e2e::binary;
+use opengs_e2e::{binary, serial};
 
 fn fr1_xyz() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
@@ -64,6 +64,7 @@ fn run(frames: usize, noise: bool) -> serde_json::Value {
 
 #[test]
 fn noise_free_run_has_sub_centimetre_ate() {
+    let _serial = serial();
     let m = run(120, false);
     let rmse = m["ate_rmse_cm"].as_f64().expect("ate_rmse_cm");
     assert!(rmse < 1.0, "ATE RMSE {rmse} cm");
@@ -72,6 +73,7 @@ fn noise_free_run_has_sub_centimetre_ate() {
 
 #[test]
 fn kinect_noise_run_stays_under_three_centimetres() {
+    let _serial = serial();
     let m = run(120, true);
     let rmse = m["ate_rmse_cm"].as_f64().expect("ate_rmse_cm");
     assert!(rmse < 3.0, "ATE RMSE {rmse} cm");

@@ -35,30 +35,10 @@ fn keyframes_become_gaussians_and_optimisation_raises_psnr() {
     for i in 0..40 {
         let f = source.frame(i).expect("frame");
         let out = tracker.track(&f.depth, f.depth_scale as f64, &k);
-        let (Some(_), Some(cloud)) = (out.keyframe, &out.source) else {
+        let (Some(_), Some(cloud)) = (out.keyframe, out.world_cloud()) else {
             continue;
         };
-        let world = cloud.transformed(&out.pose);
-        let points: Vec<[f32; 3]> = world
-            .points
-            .iter()
-            .map(|p| [p.x as f32, p.y as f32, p.z as f32])
-            .collect();
-        let covs: Vec<[f32; 6]> = world
-            .covariances
-            .iter()
-            .map(|c| {
-                [
-                    c[(0, 0)],
-                    c[(0, 1)],
-                    c[(0, 2)],
-                    c[(1, 1)],
-                    c[(1, 2)],
-                    c[(2, 2)],
-                ]
-                .map(|v| v as f32)
-            })
-            .collect();
+        let (points, covs) = (cloud.points, cloud.covariances);
         let input = DensifyInput {
             points: &points,
             covariances: &covs,

@@ -10,6 +10,7 @@ pub mod metrics;
 pub mod recorder;
 pub mod segmenter_stage;
 pub mod sensor;
+pub mod stage_main;
 pub mod stage_process;
 pub mod status;
 pub mod supervisor;

@@ -36,9 +36,10 @@ pub fn evaluate_run(run_dir: &Path) -> anyhow::Result<RunMetrics> {
         metrics.ate_mean_cm = Some(ate.mean * 100.0);
         metrics.ate_max_cm = Some(ate.max * 100.0);
     }
-    std::fs::write(
-        run_dir.join("metrics.json"),
-        serde_json::to_string_pretty(&metrics)?,
-    )?;
+    // Merge: other producers (render quality, refine) keep their keys.
+    let serde_json::Value::Object(entries) = serde_json::to_value(&metrics)? else {
+        anyhow::bail!("metrics did not serialise to an object");
+    };
+    opengs_quality::merge_metrics_json(&run_dir.join("metrics.json"), entries)?;
     Ok(metrics)
 }

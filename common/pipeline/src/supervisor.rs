@@ -35,6 +35,8 @@ pub struct RunOptions {
     pub stage_args: BTreeMap<String, Vec<String>>,
     /// Show a progress bar / periodic progress lines.
     pub progress: bool,
+    /// Score rendered views against every Nth frame at the end (0 = skip).
+    pub quality_every: usize,
 }
 
 /// What a finished run produced.
@@ -52,6 +54,7 @@ pub struct RunSummary {
     pub leftover_files: Vec<PathBuf>,
     pub recorder: Recorder,
     pub metrics: Option<crate::metrics::RunMetrics>,
+    pub quality: Option<opengs_quality::QualityReport>,
 }
 
 /// Why the main loop ended.
@@ -132,6 +135,35 @@ impl Supervisor {
                 }
             }
         };
+        let quality = if opts.quality_every > 0
+            && opts.out_dir.join("map.ply").exists()
+            && !state.recorder.is_empty()
+        {
+            eprintln!(
+                "scoring rendered views against every {}th frame ...",
+                opts.quality_every
+            );
+            let scored = opts
+                .dataset
+                .spec()
+                .and_then(|spec| Ok(opengs_datasets::open_dataset(&spec)?))
+                .and_then(|mut source| {
+                    Ok(opengs_quality::evaluate_run_quality(
+                        &opts.out_dir,
+                        source.as_mut(),
+                        opts.quality_every,
+                    )?)
+                });
+            match scored {
+                Ok(q) => Some(q),
+                Err(e) => {
+                    eprintln!("render quality: {e:#}");
+                    None
+                }
+            }
+        } else {
+            None
+        };
         let latency = state.profile.report();
         let summary = RunSummary {
             out_dir: opts.out_dir.clone(),
@@ -150,6 +182,7 @@ impl Supervisor {
             leftover_files,
             recorder: std::mem::take(&mut state.recorder),
             metrics,
+            quality,
         };
         match ending? {
             Ending::StageFailed(why) => Err(anyhow::anyhow!(

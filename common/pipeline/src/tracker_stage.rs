@@ -147,30 +147,10 @@ impl TrackerStage {
         out: &TrackOutcome,
         start: u64,
     ) -> anyhow::Result<()> {
-        let Some(cloud) = &out.source else {
+        let Some(cloud) = out.world_cloud() else {
             return Ok(());
         };
-        let world = cloud.transformed(&out.pose);
-        let points: Vec<[f32; 3]> = world
-            .points
-            .iter()
-            .map(|p| [p.x as f32, p.y as f32, p.z as f32])
-            .collect();
-        let covariances: Vec<[f32; 6]> = world
-            .covariances
-            .iter()
-            .map(|c| {
-                [
-                    c[(0, 0)],
-                    c[(0, 1)],
-                    c[(0, 2)],
-                    c[(1, 1)],
-                    c[(1, 2)],
-                    c[(2, 2)],
-                ]
-                .map(|v| v as f32)
-            })
-            .collect();
+        let (points, covariances) = (cloud.points, cloud.covariances);
         let mut stamp = Stamp::derived(MessageKind::Keyframe, &h.stamp);
         stamp.stage_start_ns = start;
         let header = KeyframeHeader::new(

@@ -1,7 +1,7 @@
 //! `cargo bench -p opengs-splat`: prints the render benchmark table.
 //! `cargo bench -p opengs-splat -- stages` prints a per-stage breakdown at 100k, 640×480.
 //! `cargo bench -p opengs-splat -- quick` times only the issue-4 case (100k, 640×480).
-//! `cargo bench -p opengs-splat -- loop N [a|sorted|unsorted]` renders case (b) (or the named
+//! `cargo bench -p opengs-splat -- loop N [a|labels|topk|sorted|unsorted]` renders case (b) (or the named
 //! variant) N times, for a profiler.
 
 use opengs_splat::bench::{run_render_bench, stage_breakdown, BenchConfig};
@@ -48,6 +48,14 @@ fn main() {
                 sort_top_k: true,
                 ..RenderRequest::semantic(50)
             },
+            Some("labels") => RenderRequest {
+                labels: true,
+                ..RenderRequest::default()
+            },
+            Some("topk") => RenderRequest {
+                top_k: Some(50),
+                ..RenderRequest::default()
+            },
             Some("unsorted") => RenderRequest {
                 sort_top_k: false,
                 ..RenderRequest::semantic(50)
@@ -55,8 +63,15 @@ fn main() {
             _ => RenderRequest::semantic(50),
         };
         let mut r = opengs_splat::render(&map, &cam, &req);
+        let mut cpu = Vec::with_capacity(n);
         for _ in 0..n {
+            let c0 = opengs_splat::bench::process_cpu_ms();
             opengs_splat::render_into(&map, &cam, &req, &mut r);
+            cpu.push(opengs_splat::bench::process_cpu_ms() - c0);
+        }
+        cpu.sort_by(f64::total_cmp);
+        if let (Some(min), Some(med)) = (cpu.first(), cpu.get(cpu.len() / 2)) {
+            println!("{req:?}: cpu ms per frame min {min:.2} median {med:.2}");
         }
         return;
     }

@@ -25,13 +25,22 @@ impl RenderRequest {
         Self::default()
     }
 
-    /// Everything the consensus stage needs: labels, top-K (K = `k`), visible counts.
+    /// Everything the consensus stage needs: labels, top-K (K = `k`), visible counts. The
+    /// top-K lists come front to back (the consensus only uses them as sets).
     pub fn semantic(k: usize) -> Self {
         Self {
             labels: true,
             top_k: Some(k),
             visible_counts: true,
+            sort_top_k: false,
+        }
+    }
+
+    /// [`RenderRequest::semantic`] with each pixel's top-K ordered heaviest first.
+    pub fn semantic_sorted(k: usize) -> Self {
+        Self {
             sort_top_k: true,
+            ..Self::semantic(k)
         }
     }
 

@@ -185,7 +185,8 @@ fn surely_culled(
     // λmax(Σ') ≤ tr(Σ') + √0.1 ≤ ‖J‖²_F·s²max + 0.6 + √0.1
     let j2 = (fx / z) * (fx / z) * (1.0 + rx * rx) + (fy / z) * (fy / z) * (1.0 + ry * ry);
     let s_max = log_scale[0].max(log_scale[1]).max(log_scale[2]);
-    let lambda = j2 * (2.0 * s_max).exp() + 0.92;
+    // exp_approx (≈1 ulp, inlined) instead of a libm call: the 1.01 margin below covers it.
+    let lambda = j2 * crate::blend::exp_approx(2.0 * s_max) + 0.92;
     let r_bound = (3.0 * lambda.sqrt() * 1.01 + 2.0).ceil() as u32;
     let mean2d = [fx * p[0] / z + k.cx as f32, fy * p[1] / z + k.cy as f32];
     radius_tile_rect(mean2d, r_bound, grid).is_empty()

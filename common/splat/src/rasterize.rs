@@ -3,13 +3,14 @@
 //!
 //! Each tile walks its depth-sorted list Gaussian by Gaussian and updates only the rows
 //! where the Gaussian can reach α ≥ 1/255 (exact: other pixels would skip it anyway), one
-//! 16-lane row at a time (one AVX-512 register, two AVX2 ones). When top-K is asked for,
-//! every contribution is appended to its pixel's slot column in the tile scratch (ids and
-//! weights, front to back, no sorting); at the end of the tile each pixel votes its label
-//! from that list and copies it (or, past K, its K heaviest) out. Labels without top-K vote
-//! in the lane loop instead (3 (label, sum) slots per pixel; pixels meeting more labels are
-//! replayed exactly at the end of the tile). Bands of 16 image rows run in parallel
-//! (rayon); one kernel is compiled per combination of requested outputs and per SIMD level.
+//! 16-lane row at a time (one AVX-512 register, two AVX2 ones; a portable build too, all
+//! bit-identical). Voting keeps 3 (label, sum) slots per pixel in the same lane loop (pixels
+//! meeting more labels are re-voted exactly at the end of the tile). For top-K every
+//! contribution is appended to its pixel's list in the tile scratch (one scatter per row
+//! visit, no sorting); at the end of the tile the lists are copied out whole when they fit
+//! in K (the usual case), else their K heaviest are selected; sorted only on request.
+//! Bands of 16 image rows run in parallel (rayon) with per-thread scratch kept across
+//! frames; one kernel is compiled per combination of requested outputs and per SIMD level.
 
 use std::cell::RefCell;
 use std::collections::BTreeMap;
@@ -149,7 +150,10 @@ pub fn rasterize_into(
         })
         .collect();
 
-    let (lists, lane_vote) = (top_k.is_some(), request.labels);
+    let lists = top_k.is_some();
+    // With lists, labels are voted from them at the end of the tile (per contribution, not
+    // per row visit); alone, in the lane loop.
+    let lane_vote = request.labels && !(lists && LIST_VOTE);
     bands.into_par_iter().for_each(|mut band| {
         SCRATCH.with(|cell| {
             let mut guard = cell.borrow_mut();
@@ -479,7 +483,7 @@ fn tile_kernel<const LISTS: bool, const VOTE: bool>(ctx: &Ctx, scratch: &mut Scr
             continue;
         }
         let mut contributed = 0u32;
-        for py in y_lo..=y_hi as u32 {
+        for py in y_lo..y_hi as u32 + 1 {
             let ly = (py - ty0) as usize;
             if st.row_live[ly] == 0 {
                 continue;
@@ -501,6 +505,9 @@ fn tile_kernel<const LISTS: bool, const VOTE: bool>(ctx: &Ctx, scratch: &mut Scr
             let (mask, done_now) = blend_row(&g, dy, &lane_x, st, ly, &mut w);
             st.row_live[ly] -= done_now;
             live -= done_now;
+            if mask == 0 {
+                continue;
+            }
             if VOTE && label != 0 {
                 vote_lanes(label, &w, st, ly);
             }
@@ -575,10 +582,13 @@ fn blend_row(
 }
 
 /// Appends (Gaussian id, weight) to the list of every pixel in `mask` on tile row `ly`.
-/// A pixel past CAP keeps counting (and overwrites its last slot); it is replayed later.
+/// Every lane writes its next slot (one scatter; a bit loop reloading lanes of the just
+/// stored weights was slower), but only contributing lanes advance: the others' writes land
+/// past their list's end and are overwritten or ignored. A pixel past CAP keeps counting
+/// (and overwrites its last slot); it is replayed later.
 #[inline(always)]
 fn push_row(
-    mut mask: u32,
+    mask: u32,
     gid: u32,
     w: &[f32; T],
     ly: usize,
@@ -587,14 +597,13 @@ fn push_row(
     ws: &mut Slots<f32>,
 ) {
     let count = &mut count[ly];
-    while mask != 0 {
-        let i = mask.trailing_zeros() as usize & (T - 1);
-        mask &= mask - 1;
+    let (ids, ws) = (&mut ids[ly], &mut ws[ly]);
+    for i in 0..T {
         let n = count[i];
         let j = (n as usize).min(CAP - 1);
-        ids[ly][i][j] = gid;
-        ws[ly][i][j] = w[i];
-        count[i] = n + 1;
+        ids[i][j] = gid;
+        ws[i][j] = w[i];
+        count[i] = n + ((mask >> i) & 1);
     }
 }
 
@@ -691,7 +700,10 @@ fn write_tile<const LISTS: bool, const VOTE: bool>(
                         None if LISTS && (st.count[y][x] as usize) <= CAP => {
                             let n = st.count[y][x] as usize;
                             let (ids, ws) = (&scratch.ids[y][x][..n], &scratch.ws[y][x][..n]);
-                            let it = ids.iter().zip(ws).map(|(&i, &w)| (ctx.labels[i as usize], w));
+                            let it = ids
+                                .iter()
+                                .zip(ws)
+                                .map(|(&i, &w)| (ctx.labels[i as usize], w));
                             vote(it, &mut scratch.votes)
                         }
                         None => {
@@ -712,6 +724,60 @@ fn write_tile<const LISTS: bool, const VOTE: bool>(
     if LISTS {
         resolve_top_k(ctx, scratch, band, x0, rows, cols, list);
     }
+}
+
+/// Vote labels from the per-pixel lists when there are lists.
+const LIST_VOTE: bool = false;
+
+/// Label slots of the list vote before it falls back to the general [`vote`].
+const LIST_VOTE_SLOTS: usize = 8;
+
+/// GS Voting over one pixel's list (front to back): the same sums, in the same order, as
+/// [`vote`] and the reference, so the same winner.
+#[inline(always)]
+fn vote_list(ids: &[u32], ws: &[f32], labels: &[u32], votes: &mut Vec<(u32, f32)>) -> u32 {
+    let mut lab = [0u32; LIST_VOTE_SLOTS];
+    let mut sum = [0.0f32; LIST_VOTE_SLOTS];
+    let mut used = 0usize;
+    // The running label's sum stays in a register (a store and reload per entry would
+    // chain through store forwarding); it is written back when the label changes.
+    let (mut cur, mut cur_label, mut acc) = (0usize, 0u32, 0.0f32);
+    for (&id, &wt) in ids.iter().zip(ws) {
+        let l = labels[id as usize];
+        if l == 0 {
+            continue;
+        }
+        if l != cur_label {
+            if cur_label != 0 {
+                sum[cur] = acc;
+            }
+            cur_label = l;
+            cur = lab[..used].iter().position(|&x| x == l).unwrap_or(used);
+            if cur == used {
+                if used == LIST_VOTE_SLOTS {
+                    let it = ids.iter().zip(ws).map(|(&i, &w)| (labels[i as usize], w));
+                    return vote(it, votes);
+                }
+                lab[used] = l;
+                sum[used] = 0.0;
+                used += 1;
+            }
+            cur &= LIST_VOTE_SLOTS - 1;
+            acc = sum[cur];
+        }
+        // 0 + w == w exactly, so a new label's sum starts like the reference's.
+        acc += wt;
+    }
+    if cur_label != 0 {
+        sum[cur] = acc;
+    }
+    let mut best = (0u32, 0.0f32);
+    for (&l, &s) in lab[..used].iter().zip(&sum[..used]) {
+        if best.0 == 0 || s > best.1 || (s == best.1 && l < best.0) {
+            best = (l, s);
+        }
+    }
+    best.0
 }
 
 /// The voted label from a pixel's lane slots; `None` when it met more labels than slots.
@@ -755,6 +821,11 @@ fn resolve_top_k(
     ) else {
         return;
     };
+    let mut vote_into = if ctx.vote && LIST_VOTE {
+        band.labels.as_deref_mut()
+    } else {
+        None
+    };
     let mut total = 0usize;
     for y in 0..rows {
         for x in 0..cols {
@@ -764,9 +835,11 @@ fn resolve_top_k(
     // The store keeps last frame's length: grow only (no per-frame memset); the band
     // truncates it to what it used when done.
     let mut at = band.topk_len;
-    if store.ids.len() < at + total {
-        store.ids.resize(at + total, 0);
-        store.weights.resize(at + total, 0.0);
+    // + SLACK: lists are copied in whole 16-entry blocks; the overhang past a pixel's list
+    // is overwritten by the next one, and past the band's end truncated away.
+    if store.ids.len() < at + total + SLACK {
+        store.ids.resize(at + total + SLACK, 0);
+        store.weights.resize(at + total + SLACK, 0.0);
     }
     band.topk_len += total;
     for y in 0..rows {
@@ -776,14 +849,34 @@ fn resolve_top_k(
             let m = n.min(k);
             start[o] = at as u32;
             count[o] = m as u16;
+            if let Some(l) = vote_into.as_deref_mut() {
+                l[o] = if n <= CAP {
+                    let (ids, ws) = (&scratch.ids[y][x][..n], &scratch.ws[y][x][..n]);
+                    vote_list(ids, ws, ctx.labels, &mut scratch.votes)
+                } else {
+                    let (px, py) = ((x0 + x) as u32, (band.band * T + y) as u32);
+                    let replay = &mut scratch.replay;
+                    replay_pixel(ctx.projected, list, px, py, replay);
+                    let it = replay
+                        .iter()
+                        .map(|&(r, wt)| (ctx.labels[list[r as usize] as usize], wt));
+                    vote(it, &mut scratch.votes)
+                };
+            }
+            if n <= k && (!sort || n <= 1) && n <= CAP {
+                // The usual case: the whole list, front to back, straight from the slots.
+                let (src_ids, src_ws) = (&scratch.ids[y][x], &scratch.ws[y][x]);
+                for b in (0..n).step_by(SLACK) {
+                    copy_block(&mut store.ids[at + b..], &src_ids[b..]);
+                    copy_block(&mut store.weights[at + b..], &src_ws[b..]);
+                }
+                at += n;
+                continue;
+            }
             let dst_ids = &mut store.ids[at..at + m];
             let dst_ws = &mut store.weights[at..at + m];
             at += m;
-            if n <= k && (!sort || n <= 1) {
-                // The usual case: the whole list, front to back, straight from the slots.
-                dst_ids.copy_from_slice(&scratch.ids[y][x][..n]);
-                dst_ws.copy_from_slice(&scratch.ws[y][x][..n]);
-            } else if n <= CAP {
+            if n <= CAP && (sort || n <= k) {
                 let (ids, ws) = (&scratch.ids[y][x], &mut scratch.ws[y][x]);
                 let pos = &mut scratch.pos;
                 // Padding weights of −1 never outrank a real one.
@@ -814,13 +907,34 @@ fn resolve_top_k(
                         j += 1;
                     }
                 }
+            } else if n <= CAP {
+                // Unsorted, longer than K: the K-th largest key by selection, then one pass
+                // keeps the keys at or above it, front to back (keys are unique).
+                let (ids, ws) = (&scratch.ids[y][x][..n], &scratch.ws[y][x][..n]);
+                let keys = &mut scratch.keys;
+                keys.clear();
+                keys.extend(ws.iter().enumerate().map(|(i, &wt)| topk_key(wt, i as u32)));
+                let (_, &mut kth, _) = keys.select_nth_unstable_by(m - 1, |a, b| b.cmp(a));
+                let mut j = 0;
+                for (i, (&id, &wt)) in ids.iter().zip(ws).enumerate() {
+                    if topk_key(wt, i as u32) >= kth {
+                        dst_ids[j] = id;
+                        dst_ws[j] = wt;
+                        j += 1;
+                    }
+                }
             } else {
                 let (px, py) = ((x0 + x) as u32, (band.band * T + y) as u32);
                 let replay = &mut scratch.replay;
                 replay_pixel(ctx.projected, list, px, py, replay);
                 let keys = &mut scratch.keys;
                 keys.clear();
-                keys.extend(replay.iter().enumerate().map(|(i, c)| topk_key(c.1, i as u32)));
+                keys.extend(
+                    replay
+                        .iter()
+                        .enumerate()
+                        .map(|(i, c)| topk_key(c.1, i as u32)),
+                );
                 for (j, &key) in select_top_k(keys, k, sort).iter().enumerate() {
                     let (r, wt) = replay[key_rank(key) as usize];
                     dst_ids[j] = list[r as usize];
@@ -829,4 +943,14 @@ fn resolve_top_k(
             }
         }
     }
+}
+
+/// Entries copied per block of a pixel's list.
+const SLACK: usize = 16;
+
+/// Copies the first SLACK entries of `src` to `dst` (a fixed size: vector moves, not a
+/// memcpy call per pixel).
+#[inline(always)]
+fn copy_block<V: Copy>(dst: &mut [V], src: &[V]) {
+    dst[..SLACK].copy_from_slice(&src[..SLACK]);
 }

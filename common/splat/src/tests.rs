@@ -45,7 +45,7 @@ fn close(a: f32, b: f32, tol: f32) -> bool {
 #[test]
 fn single_gaussian_head_on_matches_hand_values() {
     let map = map_of(&[blob(2.0, 0.02, 0.8, [0.2, 0.4, 0.6], 7)]);
-    let r = render(&map, &camera(0.05), &RenderRequest::semantic(50));
+    let r = render(&map, &camera(0.05), &RenderRequest::semantic_sorted(50));
     // Σ' = (fx/z)²σ² + 0.3 = 50²·0.02² + 0.3 = 1.3; λmax = 1.3 + sqrt(0.1) → radius ceil(3·1.2713) = 4.
     assert_eq!(r.projected.radii[0], 4);
     assert!(close(r.projected.conics[0][0], 1.0 / 1.3, 1e-6));
@@ -87,7 +87,7 @@ fn voted_label_flips_with_front_opacity() {
             blob(2.0, 0.02, o_front, [1.0, 0.0, 0.0], 1),
             blob(3.0, 0.02, 0.9, [0.0, 1.0, 0.0], 2),
         ]);
-        let r = render(&map, &camera(0.05), &RenderRequest::semantic(50));
+        let r = render(&map, &camera(0.05), &RenderRequest::semantic_sorted(50));
         let o = &r.output;
         assert_eq!(o.labels.as_ref().expect("asked")[o.index(32, 24)], want);
         let (ids, ws) = o.top_k.as_ref().expect("asked").pixel(32, 24);
@@ -109,7 +109,7 @@ fn label_zero_never_beats_a_real_label() {
         blob(2.0, 0.02, 0.9, [1.0; 3], 0),
         blob(3.0, 0.02, 0.9, [1.0; 3], 5),
     ]);
-    let r = render(&map, &camera(0.05), &RenderRequest::semantic(50));
+    let r = render(&map, &camera(0.05), &RenderRequest::semantic_sorted(50));
     assert_eq!(
         r.output.labels.as_ref().expect("asked")[r.output.index(32, 24)],
         5
@@ -126,13 +126,13 @@ fn top_k_orders_by_weight_and_truncates() {
         .map(|(i, &o)| blob(2.0 + 0.1 * i as f32, 0.02, o, [0.5; 3], i as u32 + 1))
         .collect();
     let map = map_of(&gs);
-    let r = render(&map, &camera(0.05), &RenderRequest::semantic(3));
+    let r = render(&map, &camera(0.05), &RenderRequest::semantic_sorted(3));
     let (ids, ws) = r.output.top_k.as_ref().expect("asked").pixel(32, 24);
     assert_eq!(ids, &[1, 3, 0]);
     for (got, want) in ws.iter().zip([0.45f32, 0.216, 0.1]) {
         assert!(close(*got, want, 1e-6), "{got} vs {want}");
     }
-    let r = render(&map, &camera(0.05), &RenderRequest::semantic(50));
+    let r = render(&map, &camera(0.05), &RenderRequest::semantic_sorted(50));
     let (ids, _) = r.output.top_k.as_ref().expect("asked").pixel(32, 24);
     assert_eq!(ids, &[1, 3, 0, 2, 4, 5]);
 }
@@ -143,7 +143,7 @@ fn near_plane_culls() {
         blob(0.04, 0.001, 0.9, [1.0; 3], 3),
         blob(-1.0, 0.02, 0.9, [1.0; 3], 4),
     ]);
-    let r = render(&map, &camera(0.05), &RenderRequest::semantic(50));
+    let r = render(&map, &camera(0.05), &RenderRequest::semantic_sorted(50));
     assert!(r.output.silhouette.iter().all(|&s| s == 0.0));
     assert!(r
         .output
@@ -153,7 +153,7 @@ fn near_plane_culls() {
         .is_empty());
     assert!(r.bins.ids.is_empty());
     // Same Gaussian with the near plane moved closer is rendered.
-    let r = render(&map, &camera(0.03), &RenderRequest::semantic(50));
+    let r = render(&map, &camera(0.03), &RenderRequest::semantic_sorted(50));
     assert!(r.output.silhouette[r.output.index(32, 24)] > 0.89);
 }
 
@@ -181,7 +181,7 @@ fn transmittance_saturation_stops_compositing() {
         })
         .collect();
     let map = map_of(&gs);
-    let r = render(&map, &camera(0.05), &RenderRequest::semantic(50));
+    let r = render(&map, &camera(0.05), &RenderRequest::semantic_sorted(50));
     let o = &r.output;
     let c = o.index(32, 24);
     assert_eq!(o.n_contrib[c], 3);
@@ -222,7 +222,7 @@ fn fast_matches_reference_on_random_scene() {
     for seed in 0..3 {
         let map = random_scene(600, seed);
         let cam = Camera::from_pose(k, &pose, 0.1);
-        let fast = render(&map, &cam, &RenderRequest::semantic(8)).output;
+        let fast = render(&map, &cam, &RenderRequest::semantic_sorted(8)).output;
         let slow = render_reference(&map, &cam, 8);
         let mut max_diff = 0.0f32;
         for p in 0..fast.color.len() {
@@ -282,7 +282,7 @@ fn random_scene_exercises_the_renderer() {
     let out = render(
         &map,
         &Camera::from_pose(k, &pose, 0.1),
-        &RenderRequest::semantic(8),
+        &RenderRequest::semantic_sorted(8),
     )
     .output;
     let covered = out.silhouette.iter().filter(|&&s| s > 0.5).count();
@@ -301,10 +301,8 @@ fn unsorted_top_k_is_the_same_set_front_to_back() {
         .enumerate()
         .map(|(i, &o)| blob(2.0 + 0.1 * i as f32, 0.02, o, [0.5; 3], i as u32 + 1))
         .collect();
-    let req = RenderRequest {
-        sort_top_k: false,
-        ..RenderRequest::semantic(3)
-    };
+    let req = RenderRequest::semantic(3);
+    assert!(!req.sort_top_k);
     let r = render(&map_of(&gs), &camera(0.05), &req);
     let (ids, ws) = r.output.top_k.as_ref().expect("asked").pixel(32, 24);
     assert_eq!(ids, &[0, 1, 3]);
@@ -333,7 +331,7 @@ fn top_k_of_a_long_list_matches_the_formula() {
     }
     want.sort_by(|a, b| b.1.total_cmp(&a.1));
     for k in [10usize, 50] {
-        let r = render(&map, &camera(0.05), &RenderRequest::semantic(k));
+        let r = render(&map, &camera(0.05), &RenderRequest::semantic_sorted(k));
         let (ids, ws) = r.output.top_k.as_ref().expect("asked").pixel(32, 24);
         assert_eq!(ids.len(), k.min(40));
         for (j, (&id, &w)) in ids.iter().zip(ws).enumerate() {
@@ -355,7 +353,7 @@ fn portable_kernels_match_simd_kernels() {
         ..RenderRequest::default()
     };
     for req in [
-        RenderRequest::semantic(8),
+        RenderRequest::semantic_sorted(8),
         RenderRequest::color_depth(),
         only_labels,
     ] {
@@ -378,4 +376,46 @@ fn portable_kernels_match_simd_kernels() {
             }
         }
     }
+}
+
+#[test]
+fn unsorted_top_k_matches_sorted_sets_on_random_scene() {
+    // Same entries as the sorted lists (checked against the reference above), front to back.
+    let k = Intrinsics::new(60.0, 62.0, 35.5, 25.0, 72, 52);
+    let pose = crate::scene::look_at([0.1, -0.2, -0.3], [0.0, 0.0, 2.0]);
+    let map = random_scene(600, 1);
+    let cam = Camera::from_pose(k, &pose, 0.1);
+    let plain = render(&map, &cam, &RenderRequest::color_depth());
+    let mut truncated = 0;
+    for top_k in [4usize, 8, 50] {
+        let sorted = render(&map, &cam, &RenderRequest::semantic_sorted(top_k)).output;
+        let unsorted = render(&map, &cam, &RenderRequest::semantic(top_k)).output;
+        assert_eq!(sorted.labels, unsorted.labels);
+        let (ts, tu) = (sorted.top_k.expect("asked"), unsorted.top_k.expect("asked"));
+        for y in 0..k.height {
+            for x in 0..k.width {
+                let (ids_u, ws_u) = tu.pixel(x, y);
+                let mut got: Vec<(u32, f32)> =
+                    ids_u.iter().copied().zip(ws_u.iter().copied()).collect();
+                let (ids_s, ws_s) = ts.pixel(x, y);
+                let want: Vec<(u32, f32)> =
+                    ids_s.iter().copied().zip(ws_s.iter().copied()).collect();
+                // Front to back: the pixel's contributions in depth order, filtered.
+                let order: Vec<u32> = plain
+                    .pixel_contributions(x, y)
+                    .iter()
+                    .map(|c| c.0)
+                    .collect();
+                let pos = |id: u32| order.iter().position(|&o| o == id);
+                assert!(
+                    got.windows(2).all(|p| pos(p[0].0) < pos(p[1].0)),
+                    "({x}, {y})"
+                );
+                got.sort_by(|a, b| b.1.total_cmp(&a.1).then(pos(a.0).cmp(&pos(b.0))));
+                assert_eq!(got, want, "k={top_k} pixel ({x}, {y})");
+                truncated += (order.len() > top_k) as usize;
+            }
+        }
+    }
+    assert!(truncated > 0);
 }

@@ -42,6 +42,43 @@ pub struct TrackOutcome {
     pub failure: Option<String>,
 }
 
+/// A keyframe's source cloud in the world frame, as messages carry it.
+#[derive(Debug, Clone, Default)]
+pub struct WorldKeyframeCloud {
+    pub points: Vec<[f32; 3]>,
+    /// Upper triangles `xx xy xz yy yz zz`.
+    pub covariances: Vec<[f32; 6]>,
+}
+
+impl TrackOutcome {
+    /// The frame's source cloud moved into the world by its pose (what the mapper densifies from).
+    pub fn world_cloud(&self) -> Option<WorldKeyframeCloud> {
+        let world = self.source.as_ref()?.transformed(&self.pose);
+        Some(WorldKeyframeCloud {
+            points: world
+                .points
+                .iter()
+                .map(|p| [p.x as f32, p.y as f32, p.z as f32])
+                .collect(),
+            covariances: world
+                .covariances
+                .iter()
+                .map(|c| {
+                    [
+                        c[(0, 0)],
+                        c[(0, 1)],
+                        c[(0, 2)],
+                        c[(1, 1)],
+                        c[(1, 2)],
+                        c[(2, 2)],
+                    ]
+                    .map(|v| v as f32)
+                })
+                .collect(),
+        })
+    }
+}
+
 /// Tracks frames against a growing model of keyframe points (or the map's Gaussians).
 pub struct FrameTracker {
     config: TrackerConfig,

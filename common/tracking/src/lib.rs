@@ -7,5 +7,7 @@ mod frame_tracker;
 mod motion;
 
 pub use config::TrackerConfig;
-pub use frame_tracker::{FrameTracker, KeyframeKind, TrackOutcome, TrackStatus};
+pub use frame_tracker::{
+    FrameTracker, KeyframeKind, TrackOutcome, TrackStatus, WorldKeyframeCloud,
+};
 pub use motion::ConstantVelocity;

@@ -5,7 +5,7 @@ use std::process::ExitCode;
 
 use clap::Parser;
 use opengs_pipeline::mapper_stage::{run_mapper, MapperArgs};
-use opengs_runtime::RunContext;
+use opengs_pipeline::stage_main::stage_main;
 
 #[derive(Parser)]
 #[command(about = "opengs mapper stage (started by `opengs run`)")]
@@ -21,16 +21,8 @@ struct Args {
 }
 
 fn main() -> ExitCode {
-    opengs_pipeline::logging::init("info");
     let args = Args::parse();
-    let result = RunContext::new(&args.run_id)
-        .map_err(anyhow::Error::from)
-        .and_then(|ctx| run_mapper(&ctx, &args.out, &args.mapper));
-    match result {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(e) => {
-            eprintln!("mapper: {e:#}");
-            ExitCode::FAILURE
-        }
-    }
+    stage_main("mapper", &args.run_id, |ctx| {
+        run_mapper(ctx, &args.out, &args.mapper)
+    })
 }

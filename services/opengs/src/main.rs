@@ -30,6 +30,8 @@ enum Command {
     Synth(cmd::synth::SynthArgs),
     /// Render colour, depth and labels of a Gaussian map (PLY) at a pose.
     Render(cmd::render::RenderArgs),
+    /// Keep optimising a finished run's map offline; report PSNR/SSIM before and after.
+    Refine(cmd::refine::RefineArgs),
     /// Register two point clouds (PLY or `x y z` text) with G-ICP.
     Register(cmd::register::RegisterArgs),
     /// Benchmarks that print figures.
@@ -49,6 +51,7 @@ fn main() -> ExitCode {
         Command::Profile(a) => cmd::profile::run(a),
         Command::Synth(a) => cmd::synth::run(a),
         Command::Render(a) => cmd::render::run(a),
+        Command::Refine(a) => cmd::refine::run(a),
         Command::Register(a) => cmd::register::run(a),
         Command::Bench(a) => cmd::bench::run(a),
         Command::IpcSink(a) => cmd::bench_ipc::run_sink(a),

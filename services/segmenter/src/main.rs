@@ -5,7 +5,7 @@ use std::process::ExitCode;
 
 use clap::Parser;
 use opengs_pipeline::segmenter_stage::{run_segmenter, SegmenterArgs};
-use opengs_runtime::RunContext;
+use opengs_pipeline::stage_main::stage_main;
 
 #[derive(Parser)]
 #[command(about = "opengs segmenter stage (started by `opengs run`; swapped by `opengs ctl swap`)")]
@@ -21,16 +21,8 @@ struct Args {
 }
 
 fn main() -> ExitCode {
-    opengs_pipeline::logging::init("info");
     let args = Args::parse();
-    let result = RunContext::new(&args.run_id)
-        .map_err(anyhow::Error::from)
-        .and_then(|ctx| run_segmenter(&ctx, &args.segmenter));
-    match result {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(e) => {
-            eprintln!("segmenter: {e:#}");
-            ExitCode::FAILURE
-        }
-    }
+    stage_main("segmenter", &args.run_id, |ctx| {
+        run_segmenter(ctx, &args.segmenter)
+    })
 }

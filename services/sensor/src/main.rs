@@ -5,7 +5,7 @@ use std::process::ExitCode;
 
 use clap::Parser;
 use opengs_pipeline::sensor::{run_sensor, SensorArgs};
-use opengs_runtime::RunContext;
+use opengs_pipeline::stage_main::stage_main;
 
 #[derive(Parser)]
 #[command(about = "opengs sensor stage (started by `opengs run`)")]
@@ -21,16 +21,6 @@ struct Args {
 }
 
 fn main() -> ExitCode {
-    opengs_pipeline::logging::init("info");
     let args = Args::parse();
-    let result = RunContext::new(&args.run_id)
-        .map_err(anyhow::Error::from)
-        .and_then(|ctx| run_sensor(&ctx, &args.sensor));
-    match result {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(e) => {
-            eprintln!("sensor: {e:#}");
-            ExitCode::FAILURE
-        }
-    }
+    stage_main("sensor", &args.run_id, |ctx| run_sensor(ctx, &args.sensor))
 }

@@ -4,8 +4,8 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 use clap::Parser;
+use opengs_pipeline::stage_main::stage_main;
 use opengs_pipeline::tracker_stage::{run_tracker, TrackerArgs};
-use opengs_runtime::RunContext;
 
 #[derive(Parser)]
 #[command(about = "opengs tracker stage (started by `opengs run`)")]
@@ -21,16 +21,8 @@ struct Args {
 }
 
 fn main() -> ExitCode {
-    opengs_pipeline::logging::init("info");
     let args = Args::parse();
-    let result = RunContext::new(&args.run_id)
-        .map_err(anyhow::Error::from)
-        .and_then(|ctx| run_tracker(&ctx, &args.tracker));
-    match result {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(e) => {
-            eprintln!("tracker: {e:#}");
-            ExitCode::FAILURE
-        }
-    }
+    stage_main("tracker", &args.run_id, |ctx| {
+        run_tracker(ctx, &args.tracker)
+    })
 }

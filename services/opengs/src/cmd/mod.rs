@@ -5,6 +5,7 @@ pub mod bench_render;
 pub mod ctl;
 pub mod eval;
 pub mod profile;
+pub mod refine;
 pub mod register;
 pub mod render;
 pub mod run;

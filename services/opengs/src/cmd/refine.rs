@@ -10,7 +10,7 @@ use opengs_eval::read_tum_trajectory;
 use opengs_pipeline::DatasetArgs;
 use opengs_quality::{
     evaluate_dataset_quality, load_posed_frames, merge_metrics_json, refine, write_quality_metrics,
-    QualityReport, RefineConfig,
+    write_report_json, QualityReport, RefineConfig,
 };
 use opengs_splat::{read_ply_file, write_ply_file};
 
@@ -149,6 +149,7 @@ pub fn run(args: RefineArgs) -> anyhow::Result<()> {
 
     let out = dir.join("map_refined.ply");
     write_ply_file(&map, &out).with_context(|| format!("writing {}", out.display()))?;
+    write_report_json(&dir.join("quality_refined.json"), &after)?;
     write_quality_metrics(dir, &after, "_refined")?;
     let mut extra = serde_json::Map::new();
     extra.insert("refine_iters".into(), args.iters.into());
@@ -162,6 +163,7 @@ pub fn run(args: RefineArgs) -> anyhow::Result<()> {
         before.psnr_db, after.psnr_db, before.ssim, after.ssim
     );
     println!("wrote {}", out.display());
+    println!("wrote {}", dir.join("quality_refined.json").display());
     println!("wrote {}", dir.join("metrics.json").display());
     for p in before.pngs.iter().chain(&after.pngs) {
         println!("wrote {}", p.display());

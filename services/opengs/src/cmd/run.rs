@@ -24,6 +24,9 @@ pub struct RunArgs {
     /// Start tracking at the ground-truth first pose instead of the identity.
     #[arg(long)]
     pub gt_first_pose: bool,
+    /// Score rendered views (PSNR/SSIM) against every Nth frame at the end; 0 skips it.
+    #[arg(long, default_value_t = 20)]
+    pub quality_every: usize,
     /// No progress bar or progress lines.
     #[arg(long)]
     pub quiet: bool,
@@ -78,6 +81,7 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
         max_rate: args.max_rate,
         stage_args,
         progress: !args.quiet,
+        quality_every: args.quality_every,
     })?;
     print_summary(&summary);
     Ok(())
@@ -111,6 +115,12 @@ fn print_summary(s: &RunSummary) {
                 m.frames
             );
         }
+    }
+    if let Some(q) = &s.quality {
+        println!(
+            "render quality: PSNR {:.2} dB, SSIM {:.3} over {} frames (valid depth only)",
+            q.psnr_db, q.ssim, q.frames_evaluated
+        );
     }
     println!("\nper-stage latency:\n{}", s.latency.table());
     if !s.leftover_files.is_empty() {

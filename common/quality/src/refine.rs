@@ -1,0 +1,150 @@
+//! Offline refinement of a finished map: more Adam steps of the mapping loss (METHOD §8) on
+//! a run's keyframes in random order, with periodic pruning.
+
+use std::time::Instant;
+
+use opengs_datasets::RgbdFrame;
+use opengs_geometry::{Intrinsics, Pose};
+use opengs_splat::{
+    downscale_camera2, prune, train_step, Adam, AdamConfig, Camera, GaussianMap, LossWeights,
+    PruneConfig, TrainConfig, TrainWorkspace,
+};
+use rand::seq::SliceRandom;
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use serde::Serialize;
+
+use crate::frame_images::{check_frame, target_frame};
+use crate::scene_extent::scene_extent;
+use crate::QualityError;
+
+/// How to refine.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RefineConfig {
+    pub iters: usize,
+    /// Optimise at half resolution (4× cheaper per step; what the online mapper does).
+    pub downscale: bool,
+    /// Seed of the keyframe order.
+    pub seed: u64,
+    /// Prune every this many iterations (and once at the end).
+    pub prune_every: usize,
+    pub near: f32,
+    pub loss: LossWeights,
+    /// Smallest scene extent (m) used for the learning rate and size pruning, so a nearly
+    /// static camera does not make every Gaussian "too large".
+    pub min_scene_extent: f32,
+}
+
+impl Default for RefineConfig {
+    fn default() -> Self {
+        Self {
+            iters: 1000,
+            downscale: true,
+            seed: 0,
+            prune_every: 300,
+            near: crate::DEFAULT_NEAR,
+            loss: LossWeights::default(),
+            min_scene_extent: 1.0,
+        }
+    }
+}
+
+/// What a refinement did.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct RefineStats {
+    pub iterations: usize,
+    pub keyframes: usize,
+    pub scene_extent: f32,
+    pub gaussians_before: usize,
+    pub gaussians_after: usize,
+    pub pruned: usize,
+    /// Mean training loss over the first and the last tenth of the steps.
+    pub first_loss: f32,
+    pub last_loss: f32,
+    pub seconds: f64,
+}
+
+/// Optimises `map` for `config.iters` steps on `keyframes` (frame, camera-to-world pose;
+/// frames are `intrinsics`-sized), shuffling their order every pass. `progress(i, loss)`
+/// is called after step i (1-based).
+pub fn refine(
+    map: &mut GaussianMap,
+    keyframes: &[(RgbdFrame, Pose)],
+    intrinsics: Intrinsics,
+    config: &RefineConfig,
+    mut progress: impl FnMut(usize, f32),
+) -> Result<RefineStats, QualityError> {
+    if keyframes.is_empty() {
+        return Err(QualityError::NoFrames {
+            reason: "no keyframes to refine on".into(),
+        });
+    }
+    for (frame, _) in keyframes {
+        check_frame(frame, &intrinsics)?;
+    }
+    let t0 = Instant::now();
+    let extent = scene_extent(keyframes.iter().map(|(_, p)| *p), config.min_scene_extent);
+    let cameras: Vec<Camera> = keyframes
+        .iter()
+        .map(|(_, pose)| {
+            let cam = Camera::from_pose(intrinsics, pose, config.near);
+            if config.downscale {
+                downscale_camera2(&cam)
+            } else {
+                cam
+            }
+        })
+        .collect();
+    let prune_config = PruneConfig {
+        scene_extent: extent,
+        ..PruneConfig::default()
+    };
+    let gaussians_before = map.len();
+    let mut adam = Adam::new(AdamConfig::gs_defaults(extent), map.len());
+    let mut ws = TrainWorkspace::new();
+    let train = TrainConfig { loss: config.loss };
+    let mut rng = ChaCha8Rng::seed_from_u64(config.seed);
+    let mut order: Vec<usize> = Vec::new();
+    let mut losses = Vec::with_capacity(config.iters);
+    for i in 0..config.iters {
+        if order.is_empty() {
+            // A fresh shuffled pass: every keyframe once per pass.
+            order = (0..keyframes.len()).collect();
+            order.shuffle(&mut rng);
+        }
+        let k = order.pop().unwrap_or(0);
+        // Targets are built per step so only the compact RGB-D frames stay in memory.
+        let full = target_frame(&keyframes[k].0);
+        let target = if config.downscale {
+            full.downscale2()
+        } else {
+            full
+        };
+        let step = train_step(map, &mut adam, &cameras[k], &target, &train, &mut ws);
+        losses.push(step.loss.total);
+        if config.prune_every > 0 && (i + 1) % config.prune_every == 0 {
+            prune(map, Some(&mut adam), &prune_config);
+        }
+        progress(i + 1, step.loss.total);
+    }
+    prune(map, Some(&mut adam), &prune_config);
+    let tenth = (losses.len() / 10).max(1);
+    let mean = |s: &[f32]| {
+        if s.is_empty() {
+            f32::NAN
+        } else {
+            s.iter().sum::<f32>() / s.len() as f32
+        }
+    };
+    Ok(RefineStats {
+        iterations: config.iters,
+        keyframes: keyframes.len(),
+        scene_extent: extent,
+        gaussians_before,
+        gaussians_after: map.len(),
+        pruned: gaussians_before.saturating_sub(map.len()),
+        first_loss: mean(&losses[..tenth.min(losses.len())]),
+        last_loss: mean(&losses[losses.len().saturating_sub(tenth)..]),
+        seconds: t0.elapsed().as_secs_f64(),
+    })
+}

@@ -1,0 +1,32 @@
+//! What a quality evaluation found.
+
+use std::path::PathBuf;
+
+use serde::Serialize;
+
+/// Scores of one evaluated frame.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct FrameQuality {
+    /// Dataset frame index.
+    pub index: usize,
+    pub timestamp: f64,
+    pub psnr_db: f64,
+    pub ssim: f64,
+    /// Fraction of pixels with valid input depth (the evaluated ones).
+    pub valid_fraction: f64,
+}
+
+/// Render quality over a set of frames (METHOD §9: masked where input depth is missing).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct QualityReport {
+    pub frames_evaluated: usize,
+    /// Mean over frames of the per-frame PSNR (dB), as 3DGS-SLAM papers report it.
+    pub psnr_db: f64,
+    /// Mean over frames of the per-frame SSIM.
+    pub ssim: f64,
+    /// Frames skipped because no pixel had depth.
+    pub frames_without_depth: usize,
+    pub per_frame: Vec<FrameQuality>,
+    /// Side-by-side PNGs written.
+    pub pngs: Vec<PathBuf>,
+}
