@@ -52,6 +52,10 @@ impl Mapper {
         }
     }
 
+    pub fn config(&self) -> &MapperConfig {
+        &self.config
+    }
+
     pub fn map(&self) -> &GaussianMap {
         &self.map
     }
@@ -104,7 +108,7 @@ impl Mapper {
             &mut self.workspace,
         );
         self.iterations += 1;
-        if self.iterations % self.config.prune_every == 0 {
+        if self.iterations.is_multiple_of(self.config.prune_every) {
             prune(&mut self.map, Some(&mut self.adam), &self.config.prune);
         }
         Some(stats)

@@ -2,7 +2,7 @@
 
 use opengs_datasets::{open_dataset, DatasetSpec};
 use opengs_mapping::{DensifyInput, Mapper, MapperConfig, StoredKeyframe};
-use opengs_splat::{render, Camera, RenderRequest};
+use opengs_splat::{render, RenderRequest};
 use opengs_tracking::{FrameTracker, TrackerConfig};
 
 fn psnr(kf: &StoredKeyframe, mapper: &Mapper) -> f64 {
@@ -13,8 +13,8 @@ fn psnr(kf: &StoredKeyframe, mapper: &Mapper) -> f64 {
         if kf.target.depth[i] <= 0.0 {
             continue;
         }
-        for ch in 0..3 {
-            let d = (c[ch].clamp(0.0, 1.0) - kf.target.rgb[ch][i]) as f64;
+        for (ch, value) in c.iter().enumerate() {
+            let d = (value.clamp(0.0, 1.0) - kf.target.rgb[ch][i]) as f64;
             se += d * d;
         }
         n += 3;
@@ -53,8 +53,7 @@ fn keyframes_become_gaussians_and_optimisation_raises_psnr() {
             &f.rgb,
             &f.depth,
             f.depth_scale,
-            config.near,
-            true,
+            &config,
         );
         let added = mapper.add_keyframe(&input, kf.clone());
         assert!(

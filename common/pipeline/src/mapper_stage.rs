@@ -67,7 +67,6 @@ impl MapperStage {
         let pose = pose_from_tum(&h.pose)?;
         let [fx, fy, cx, cy] = h.intrinsics;
         let k = Intrinsics::new(fx, fy, cx, cy, h.width, h.height);
-        let config = MapperConfig::default();
         let stored = StoredKeyframe::new(
             h.stamp.seq,
             pose,
@@ -75,8 +74,7 @@ impl MapperStage {
             view.rgb,
             view.depth,
             h.depth_scale,
-            config.near,
-            true,
+            self.mapper.config(),
         );
         let input = DensifyInput {
             points: view.points,
