@@ -15,7 +15,9 @@ pub struct MapperConfig {
     pub loss: LossWeights,
     /// Gaussians above this opacity are given to the tracker (0.09 TUM, 0.05 Replica).
     pub trackable_opacity: f32,
-    /// Scene extent (m) that scales the position learning rate.
+    /// Extent (m) that scales the position learning rate (3DGS: 1.6e-4 × extent). 1 m, not the
+    /// room size: the tracker tracks against these means, and faster-moving Gaussians biased
+    /// it (synthetic loop, 240 frames: ATE 0.50 cm with 5 m, 0.08 cm with 1 m).
     pub scene_extent: f32,
     /// Near plane for rendering (m).
     pub near: f32,
@@ -33,7 +35,7 @@ impl Default for MapperConfig {
             prune: PruneConfig::default(),
             loss: LossWeights::default(),
             trackable_opacity: 0.09,
-            scene_extent: 5.0,
+            scene_extent: 1.0,
             near: 0.05,
             seed: 0,
         }
