@@ -3,7 +3,7 @@
 use std::io::Write;
 use std::path::Path;
 
-use opengs_geometry::{pose_from_tum, Pose};
+use opengs_geometry::{format_tum_pose, pose_from_tum, Pose};
 
 use crate::text::{data_lines, parse_numbers};
 use crate::DatasetError;
@@ -36,12 +36,7 @@ pub fn read_tum_trajectory(path: &Path) -> Result<Vec<StampedPose>, DatasetError
 
 /// Formats a pose line with enough digits to round-trip within 1e-9.
 pub fn format_tum_line(timestamp: f64, pose: &Pose) -> String {
-    let t = pose.translation.vector;
-    let q = pose.rotation.quaternion();
-    format!(
-        "{timestamp:.6} {:.9} {:.9} {:.9} {:.9} {:.9} {:.9} {:.9}",
-        t.x, t.y, t.z, q.i, q.j, q.k, q.w
-    )
+    format!("{timestamp:.6} {}", format_tum_pose(pose))
 }
 
 /// Writes a TUM trajectory file.

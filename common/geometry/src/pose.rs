@@ -44,12 +44,12 @@ pub fn pose_from_tum(v: &[f64; 7]) -> Result<Pose, PoseParseError> {
     ))
 }
 
-/// Formats a pose as `tx ty tz qx qy qz qw` (TUM order).
+/// Formats a pose as `tx ty tz qx qy qz qw` (TUM order), 9 decimals (round-trips to 1e-9).
 pub fn format_tum_pose(p: &Pose) -> String {
     let t = p.translation.vector;
     let q = p.rotation.quaternion();
     format!(
-        "{:.6} {:.6} {:.6} {:.6} {:.6} {:.6} {:.6}",
+        "{:.9} {:.9} {:.9} {:.9} {:.9} {:.9} {:.9}",
         t.x, t.y, t.z, q.i, q.j, q.k, q.w
     )
 }

@@ -1,9 +1,9 @@
 //! The run recorder: collects every pose the tracker publishes and writes the trajectory.
 
 use std::collections::BTreeMap;
-use std::io::Write;
 use std::path::Path;
 
+use opengs_eval::{write_tum_trajectory, TimedPose, TrajectoryError};
 use opengs_geometry::{pose_from_tum, Pose};
 use opengs_ipc_schema::{PoseHeader, PoseStatus};
 
@@ -55,10 +55,6 @@ impl Recorder {
         self.frames.is_empty()
     }
 
-    pub fn frames(&self) -> impl Iterator<Item = (&u64, &TrackedFrame)> {
-        self.frames.iter()
-    }
-
     pub fn keyframes(&self) -> usize {
         self.frames.values().filter(|f| f.keyframe).count()
     }
@@ -71,34 +67,25 @@ impl Recorder {
     }
 
     /// Writes `trajectory.txt` (and `groundtruth.txt` when known) in TUM format.
-    pub fn write(&self, dir: &Path) -> std::io::Result<()> {
-        write_tum(
-            &dir.join("trajectory.txt"),
-            self.frames.values().map(|f| (f.timestamp, &f.pose)),
-        )?;
-        if self.frames.values().any(|f| f.gt.is_some()) {
-            write_tum(
-                &dir.join("groundtruth.txt"),
-                self.frames
-                    .values()
-                    .filter_map(|f| f.gt.as_ref().map(|g| (f.timestamp, g))),
-            )?;
+    pub fn write(&self, dir: &Path) -> Result<(), TrajectoryError> {
+        let timed = |pose: &Pose, timestamp: f64| TimedPose {
+            timestamp,
+            pose: *pose,
+        };
+        let estimated: Vec<TimedPose> = self
+            .frames
+            .values()
+            .map(|f| timed(&f.pose, f.timestamp))
+            .collect();
+        write_tum_trajectory(&dir.join("trajectory.txt"), &estimated)?;
+        let gt: Vec<TimedPose> = self
+            .frames
+            .values()
+            .filter_map(|f| f.gt.as_ref().map(|g| timed(g, f.timestamp)))
+            .collect();
+        if !gt.is_empty() {
+            write_tum_trajectory(&dir.join("groundtruth.txt"), &gt)?;
         }
         Ok(())
     }
-}
-
-fn write_tum<'a>(path: &Path, poses: impl Iterator<Item = (f64, &'a Pose)>) -> std::io::Result<()> {
-    let mut out = std::io::BufWriter::new(std::fs::File::create(path)?);
-    writeln!(out, "# timestamp tx ty tz qx qy qz qw")?;
-    for (t, p) in poses {
-        let v = p.translation.vector;
-        let q = p.rotation.quaternion();
-        writeln!(
-            out,
-            "{t:.6} {:.9} {:.9} {:.9} {:.9} {:.9} {:.9} {:.9}",
-            v.x, v.y, v.z, q.i, q.j, q.k, q.w
-        )?;
-    }
-    out.flush()
 }

@@ -103,7 +103,7 @@ impl Supervisor {
                 replies: Outlet::new(&ctx, &node, &CONTROL_REPLIES, 4096)?,
             };
             let result = state
-                .start_all(&ctx, &ch)
+                .start_all(&ch)
                 .and_then(|()| state.main_loop(&ctx, &ch, started));
             // Stop in order whatever happened: the source first, so consumers see the end.
             state.stop_all();
@@ -300,7 +300,7 @@ impl RunState {
     }
 
     /// Starts each stage in deploy order and waits until it reports ready.
-    fn start_all(&mut self, ctx: &RunContext, ch: &Channels) -> anyhow::Result<()> {
+    fn start_all(&mut self, ch: &Channels) -> anyhow::Result<()> {
         let ws = waitset()?;
         let _t = ws
             .attach_notification(ch.telemetry.listener())
@@ -344,7 +344,6 @@ impl RunState {
                 }
             }
         }
-        let _ = ctx;
         Ok(())
     }
 
