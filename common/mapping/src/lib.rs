@@ -7,8 +7,15 @@ mod config;
 mod densify;
 mod keyframe;
 mod mapper;
+mod pixel_top_k;
+mod semantic;
 
 pub use config::MapperConfig;
 pub use densify::{gaussians_from_points, DensifyInput};
 pub use keyframe::StoredKeyframe;
 pub use mapper::{Mapper, TrackableGaussians};
+pub use pixel_top_k::PixelTopK;
+pub use semantic::{
+    ConsensusApplied, ConsensusApplyError, ConsensusUpdate, KeyframeRender, LabelVisibility,
+    PendingRenders, MAX_PENDING_RENDERS,
+};

@@ -6,6 +6,7 @@ use opengs_splat::{
 };
 
 use crate::densify::{gaussians_from_points, DensifyInput};
+use crate::semantic::PendingRenders;
 use crate::{MapperConfig, StoredKeyframe};
 
 /// The trackable Gaussians (opacity above the threshold) in the tracker's terms.
@@ -21,8 +22,10 @@ pub struct TrackableGaussians {
 /// Owns the map, its optimiser state and the keyframes it optimises against.
 pub struct Mapper {
     config: MapperConfig,
-    map: GaussianMap,
-    adam: Adam,
+    pub(crate) map: GaussianMap,
+    pub(crate) adam: Adam,
+    /// Semantic renders waiting for their consensus (their top-K ids follow every prune).
+    pub(crate) pending: PendingRenders,
     keyframes: Vec<StoredKeyframe>,
     workspace: TrainWorkspace,
     rng: ChaCha8Rng,
@@ -44,6 +47,7 @@ impl Mapper {
             config,
             map,
             adam,
+            pending: PendingRenders::default(),
             keyframes: Vec::new(),
             workspace: TrainWorkspace::new(),
             rng,
@@ -109,7 +113,8 @@ impl Mapper {
         );
         self.iterations += 1;
         if self.iterations.is_multiple_of(self.config.prune_every) {
-            prune(&mut self.map, Some(&mut self.adam), &self.config.prune);
+            let old_to_new = prune(&mut self.map, Some(&mut self.adam), &self.config.prune);
+            self.pending.remap(&old_to_new);
         }
         Some(stats)
     }

@@ -1,0 +1,259 @@
+//! The mapper's side of the semantic loop: a GS Voting render at a keyframe pose for the
+//! consensus, and the consensus result applied to the map (METHOD §3–§5).
+//!
+//! Decisions where METHOD.md is open:
+//! - Unlabelled (label 0) Gaussians whose centre projects onto a pixel of the consistent
+//!   input label map, within the rendered surface depth there, take that pixel's label. For
+//!   the Gaussians added at this keyframe that is the pixel they were back-projected from;
+//!   the rule also labels Gaussians of keyframes the (slow) segmenter skipped.
+//! - Order: relabels via G_topK, then counter-pruning selection (so a Gaussian just moved to
+//!   a fresh label is not pruned as a counter of its old one), then unlabelled Gaussians
+//!   take labels, then the counter Gaussians are removed.
+
+use std::collections::{BTreeMap, VecDeque};
+
+use opengs_semantics::{
+    apply_relabels, select_counter_gaussians, CounterPruneRegion, RelabelInstruction,
+};
+use opengs_splat::{render, Camera, RenderRequest};
+
+use crate::mapper::Mapper;
+use crate::pixel_top_k::PixelTopK;
+
+/// Renders kept at most while their consensus is outstanding (the segmenter works on the
+/// newest keyframe only, so more would be stale).
+pub const MAX_PENDING_RENDERS: usize = 4;
+
+/// Visible and total Gaussians of one label in a keyframe render (completeness, §5.2).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct LabelVisibility {
+    pub label: u32,
+    pub visible: u32,
+    pub total: u32,
+}
+
+/// A GS Voting render at a keyframe pose, kept until the consensus for it is applied.
+#[derive(Debug, Clone)]
+pub struct KeyframeRender {
+    pub seq: u64,
+    pub camera: Camera,
+    /// Row-major voted labels (0 = nothing rendered).
+    pub label_map: Vec<u32>,
+    /// Rendered surface depth D/S (0 where the silhouette is below ½).
+    pub surface_depth: Vec<f32>,
+    pub top_k: PixelTopK,
+    /// Every non-zero label of the map, visible or not.
+    pub visibility: Vec<LabelVisibility>,
+}
+
+/// Per-keyframe consensus result, as the mapper needs it.
+#[derive(Debug, Clone, Copy)]
+pub struct ConsensusUpdate<'a> {
+    pub seq: u64,
+    /// Row-major W×H consistent input label map (global labels).
+    pub consistent_label_map: &'a [u32],
+    pub relabels: &'a [RelabelInstruction],
+    pub counter_regions: &'a [CounterPruneRegion],
+    /// Counter Gaussians are pruned when their largest scale (m) exceeds this (θ).
+    pub counter_prune_scale: f32,
+}
+
+/// What applying one consensus result did.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct ConsensusApplied {
+    /// Label writes through G_topK.
+    pub relabelled: usize,
+    /// Unlabelled Gaussians that took a label from the consistent input label map.
+    pub labelled: usize,
+    /// Counter Gaussians removed.
+    pub pruned: usize,
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum ConsensusApplyError {
+    #[error("no render of keyframe #{0} is pending (restarted mapper, or it was superseded)")]
+    NoRender(u64),
+    #[error("consistent label map of keyframe #{seq} has {got} pixels, the render {expected}")]
+    SizeMismatch { seq: u64, expected: usize, got: usize },
+    #[error("consensus of keyframe #{seq}: {source}")]
+    Invalid {
+        seq: u64,
+        source: opengs_semantics::SemanticsError,
+    },
+}
+
+/// Renders outstanding, oldest first.
+#[derive(Debug, Clone, Default)]
+pub struct PendingRenders(VecDeque<KeyframeRender>);
+
+impl PendingRenders {
+    pub fn len(&self) -> usize {
+        self.0.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.0.is_empty()
+    }
+
+    fn push(&mut self, r: KeyframeRender) {
+        self.0.retain(|old| old.seq != r.seq);
+        while self.0.len() >= MAX_PENDING_RENDERS {
+            self.0.pop_front();
+        }
+        self.0.push_back(r);
+    }
+
+    fn take(&mut self, seq: u64) -> Option<KeyframeRender> {
+        let i = self.0.iter().position(|r| r.seq == seq)?;
+        self.0.remove(i)
+    }
+
+    /// Keeps the kept top-K ids valid after the map was compacted.
+    pub fn remap(&mut self, old_to_new: &[Option<u32>]) {
+        for r in &mut self.0 {
+            r.top_k.remap(old_to_new);
+        }
+    }
+}
+
+impl Mapper {
+    /// GS Voting render with top-K (K = `k`) and per-label visibility at `camera` (full
+    /// resolution); kept for [`Mapper::apply_consensus`] of keyframe `seq`.
+    pub fn render_for_consensus(&mut self, seq: u64, camera: &Camera, k: usize) -> &KeyframeRender {
+        let r = render(&self.map, camera, &RenderRequest::semantic(k));
+        let out = r.output;
+        let label_map = out.labels.unwrap_or_default();
+        let surface_depth = out
+            .depth
+            .iter()
+            .zip(&out.silhouette)
+            .map(|(&d, &s)| if s >= 0.5 { d / s } else { 0.0 })
+            .collect();
+        let top_k = out
+            .top_k
+            .as_ref()
+            .map(PixelTopK::from_render)
+            .unwrap_or_default();
+        let visible = out.visible_per_label.unwrap_or_default();
+        let visibility = label_visibility(&self.map.count_per_label(), &visible);
+        self.pending.push(KeyframeRender {
+            seq,
+            camera: *camera,
+            label_map,
+            surface_depth,
+            top_k,
+            visibility,
+        });
+        self.pending.0.back().expect("just pushed")
+    }
+
+    /// Renders waiting for their consensus.
+    pub fn pending_renders(&self) -> &PendingRenders {
+        &self.pending
+    }
+
+    /// Applies one keyframe's consensus through the top-K kept from its render. On error the
+    /// map is unchanged.
+    pub fn apply_consensus(
+        &mut self,
+        update: &ConsensusUpdate,
+    ) -> Result<ConsensusApplied, ConsensusApplyError> {
+        let seq = update.seq;
+        let render = self
+            .pending
+            .take(seq)
+            .ok_or(ConsensusApplyError::NoRender(seq))?;
+        let pixels = render.label_map.len();
+        if update.consistent_label_map.len() != pixels {
+            return Err(ConsensusApplyError::SizeMismatch {
+                seq,
+                expected: pixels,
+                got: update.consistent_label_map.len(),
+            });
+        }
+        let invalid = |source| ConsensusApplyError::Invalid { seq, source };
+        // Check the counter regions before the relabels change anything.
+        select_counter_gaussians(
+            &render.top_k,
+            &self.map.labels,
+            |_| 0.0,
+            f32::INFINITY,
+            update.counter_regions,
+        )
+        .map_err(invalid)?;
+        let relabelled =
+            apply_relabels(&render.top_k, &mut self.map.labels, update.relabels).map_err(invalid)?;
+        let map = &self.map;
+        let counters = select_counter_gaussians(
+            &render.top_k,
+            &map.labels,
+            |i| {
+                let s = map.scale(i);
+                s[0].max(s[1]).max(s[2])
+            },
+            update.counter_prune_scale,
+            update.counter_regions,
+        )
+        .map_err(invalid)?;
+        let labelled = self.label_unlabelled(&render, update.consistent_label_map);
+        if !counters.is_empty() {
+            let mut remove = vec![false; self.map.len()];
+            for &i in &counters {
+                remove[i as usize] = true;
+            }
+            let old_to_new = self.map.remove_where(&remove);
+            self.adam.compact(&old_to_new);
+            self.pending.remap(&old_to_new);
+        }
+        Ok(ConsensusApplied {
+            relabelled,
+            labelled,
+            pruned: counters.len(),
+        })
+    }
+
+    /// Label-0 Gaussians on the rendered surface of a labelled pixel take its label.
+    fn label_unlabelled(&mut self, render: &KeyframeRender, labels: &[u32]) -> usize {
+        let cam = &render.camera;
+        let k = cam.intrinsics;
+        let (w, h) = (k.width as f32, k.height as f32);
+        let mut labelled = 0;
+        for i in 0..self.map.len() {
+            if self.map.labels[i] != 0 {
+                continue;
+            }
+            let [x, y, z] = cam.to_camera(self.map.means[i]);
+            if z <= cam.near {
+                continue;
+            }
+            let u = (k.fx as f32 * x / z + k.cx as f32).round();
+            let v = (k.fy as f32 * y / z + k.cy as f32).round();
+            if !(u >= 0.0 && v >= 0.0 && u < w && v < h) {
+                continue;
+            }
+            let p = v as usize * k.width as usize + u as usize;
+            let surface = render.surface_depth[p];
+            if labels[p] != 0 && surface > 0.0 && (z - surface).abs() <= 0.03 + 0.02 * surface {
+                self.map.labels[i] = labels[p];
+                labelled += 1;
+            }
+        }
+        labelled
+    }
+}
+
+/// Visible and total counts of every non-zero label in the map.
+fn label_visibility(
+    total: &BTreeMap<u32, u32>,
+    visible: &BTreeMap<u32, u32>,
+) -> Vec<LabelVisibility> {
+    total
+        .iter()
+        .filter(|(&l, _)| l != 0)
+        .map(|(&label, &total)| LabelVisibility {
+            label,
+            visible: visible.get(&label).copied().unwrap_or(0).min(total),
+            total,
+        })
+        .collect()
+}
