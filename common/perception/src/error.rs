@@ -25,6 +25,12 @@ pub enum PerceptionError {
         path: std::path::PathBuf,
         message: String,
     },
+    /// A side file of a model (tag list, text embeddings) is missing or malformed.
+    #[error("{path}: {message}")]
+    File {
+        path: std::path::PathBuf,
+        message: String,
+    },
     #[error(transparent)]
     Dataset(#[from] opengs_datasets::DatasetError),
 }

@@ -36,16 +36,48 @@ impl SegmenterKind {
         self.create_with(&SegmenterOptions::default())
     }
 
-    /// Builds the segmenter; `sam` and `mobilesamv2` load `options.sam_models`.
+    /// Builds the segmenter; `sam` and `mobilesamv2` load `options.sam_models`
+    /// (`mobilesamv2` prompts with the boxes of `options.proposals` when
+    /// given). With ensemble models in `options.ensemble`, any kind's masks
+    /// get class names from them.
     pub fn create_with(
         &self,
         options: &SegmenterOptions,
     ) -> Result<Box<dyn Segmenter>, PerceptionError> {
-        match self {
-            Self::Classic => Ok(Box::new(ClassicSegmenter::new(options.classic)?)),
-            Self::Prior => Ok(Box::new(PriorSegmenter::new())),
-            Self::Sam | Self::MobileSamV2 => self.create_model_runner(options),
+        if options.proposals.is_some() && *self != Self::MobileSamV2 {
+            return Err(self.unavailable("box proposals (--proposals) are for mobilesamv2"));
         }
+        let segmenter: Box<dyn Segmenter> = match self {
+            Self::Classic => Box::new(ClassicSegmenter::new(options.classic)?),
+            Self::Prior => Box::new(PriorSegmenter::new()),
+            Self::Sam | Self::MobileSamV2 => self.create_model_runner(options)?,
+        };
+        if options.ensemble.any() {
+            self.with_ensemble(segmenter, options)
+        } else {
+            Ok(segmenter)
+        }
+    }
+
+    #[cfg(feature = "onnx")]
+    fn with_ensemble(
+        &self,
+        segmenter: Box<dyn Segmenter>,
+        options: &SegmenterOptions,
+    ) -> Result<Box<dyn Segmenter>, PerceptionError> {
+        let ensemble = crate::ensemble::Ensemble::new(&options.ensemble, options.threads)?;
+        Ok(Box::new(crate::ensemble::EnsembleSegmenter::new(
+            segmenter, ensemble,
+        )))
+    }
+
+    #[cfg(not(feature = "onnx"))]
+    fn with_ensemble(
+        &self,
+        _segmenter: Box<dyn Segmenter>,
+        _options: &SegmenterOptions,
+    ) -> Result<Box<dyn Segmenter>, PerceptionError> {
+        Err(self.unavailable("the tagger/detector ensemble needs the `onnx` cargo feature"))
     }
 
     #[cfg(feature = "onnx")]
@@ -57,12 +89,16 @@ impl SegmenterKind {
             .sam_models
             .as_ref()
             .ok_or_else(|| self.unavailable("needs encoder and decoder model paths"))?;
-        let segmenter = crate::sam::SamSegmenter::new(
+        let mut segmenter = crate::sam::SamSegmenter::new(
             *self,
             paths,
             crate::sam::AmgParams::default(),
             options.threads,
         )?;
+        if let Some(proposals) = &options.proposals {
+            let proposer = crate::sam::BoxProposer::new(proposals, options.threads)?;
+            segmenter = segmenter.with_box_proposals(proposer);
+        }
         Ok(Box::new(segmenter))
     }
 

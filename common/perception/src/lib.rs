@@ -4,13 +4,20 @@
 //! plus the input Label-Class table out. `classic` needs no weights,
 //! `prior` replays the dataset's ground-truth instances; `sam` and
 //! `mobilesamv2` run exported ONNX models (cargo feature `onnx`, runtime
-//! library from `ORT_DYLIB_PATH`, see DEPS.md).
+//! library from `ORT_DYLIB_PATH`, see DEPS.md). An optional ensemble
+//! (tagger + open-vocabulary detector, [`ensemble`]) names the masks of any
+//! segmenter; [`model_check`] checks exported files against their role.
 
 pub mod bench;
+pub mod class_match;
 pub mod classic;
+#[cfg(feature = "onnx")]
+pub mod ensemble;
 mod error;
 mod kind;
+pub mod model_check;
 mod model_paths;
+pub mod npy;
 mod prior;
 #[cfg(feature = "onnx")]
 pub mod sam;
@@ -20,7 +27,7 @@ mod segmenter;
 pub use classic::{ClassicParams, ClassicSegmenter, EdgeWeights};
 pub use error::PerceptionError;
 pub use kind::SegmenterKind;
-pub use model_paths::{SamModelPaths, SegmenterOptions};
+pub use model_paths::{EnsembleModelPaths, SamModelPaths, SegmenterOptions};
 pub use prior::PriorSegmenter;
 pub use segmentation::{SegmentInfo, Segmentation};
 pub use segmenter::{Segmenter, SegmenterInput};

@@ -12,12 +12,44 @@ pub struct SamModelPaths {
     pub decoder: PathBuf,
 }
 
+/// The optional ensemble models that put class names on masks (METHOD §6;
+/// export layouts in [`crate::class_match`] and the README's models section).
+#[derive(Debug, Clone, PartialEq, Eq, Default)]
+pub struct EnsembleModelPaths {
+    /// RAM/RAM++ tagger: `image[1,3,384,384] → tag[1,T]` (or `logits[1,T]`).
+    pub tagger: Option<PathBuf>,
+    /// One tag name per line, T lines, in the tagger's output order
+    /// (recognize-anything's `ram_tag_list.txt`).
+    pub tag_list: Option<PathBuf>,
+    /// YOLO-World with a text prompt: `images[1,3,S,S], text_features[1,K,D]
+    /// → scores[1,N,K], boxes[1,N,4]`.
+    pub detector: Option<PathBuf>,
+    /// `.npy` float32 `[T, D]`: the detector's (CLIP) text feature of every tag.
+    pub text_embeddings: Option<PathBuf>,
+}
+
+impl EnsembleModelPaths {
+    /// True when any ensemble model is given.
+    pub fn any(&self) -> bool {
+        self.tagger.is_some()
+            || self.tag_list.is_some()
+            || self.detector.is_some()
+            || self.text_embeddings.is_some()
+    }
+}
+
 /// Everything needed to build any segmenter kind.
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct SegmenterOptions {
     pub classic: crate::ClassicParams,
     /// Required for `sam` and `mobilesamv2`.
     pub sam_models: Option<SamModelPaths>,
+    /// MobileSAMv2's box-proposal model (YOLOv8 export,
+    /// `images[1,3,S,S] → output0[1,4+nc,N]`); `mobilesamv2` prompts the
+    /// decoder with its boxes instead of a point grid.
+    pub proposals: Option<PathBuf>,
+    /// Tagger + open-vocabulary detector that name the masks.
+    pub ensemble: EnsembleModelPaths,
     /// ONNX Runtime intra-op threads (0 = 1).
     pub threads: usize,
 }

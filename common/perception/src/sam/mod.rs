@@ -1,13 +1,18 @@
 //! SAM-family ONNX runners (SAM ViT, MobileSAMv2 share the exported
 //! encoder/decoder signature): the encoder runs once per frame, the prompt
-//! decoder once per grid point, then automatic mask generation.
+//! decoder once per prompt, then automatic mask generation. Prompts are a
+//! point grid (SAM's automatic mask generator) or, with a box-proposal model
+//! (MobileSAMv2), one box per proposed object: the two corners with labels
+//! 2 and 3, the standard SAM decoder export's box encoding.
 
 mod amg;
 mod bitmask;
 mod preprocess;
-mod runtime;
+mod proposals;
+pub(crate) mod runtime;
 
 pub use amg::AmgParams;
+pub use proposals::BoxProposer;
 
 use std::path::{Path, PathBuf};
 
@@ -17,6 +22,7 @@ use ndarray::{Array1, Array2, Array3, Array4, ArrayD};
 use ort::session::Session;
 use ort::value::TensorRef;
 
+use crate::model_check::{load_checked, ModelRole};
 use crate::{PerceptionError, Segmentation, Segmenter, SegmenterInput, SegmenterKind};
 use preprocess::{encoder_input, resize_scale};
 
@@ -27,6 +33,7 @@ pub struct SamSegmenter {
     decoder: Session,
     encoder_path: PathBuf,
     decoder_path: PathBuf,
+    proposer: Option<BoxProposer>,
     params: AmgParams,
     frames_done: u64,
 }
@@ -37,6 +44,7 @@ impl std::fmt::Debug for SamSegmenter {
             .field("kind", &self.kind)
             .field("encoder", &self.encoder_path)
             .field("decoder", &self.decoder_path)
+            .field("box_prompts", &self.proposer.is_some())
             .field("params", &self.params)
             .finish()
     }
@@ -57,13 +65,21 @@ impl SamSegmenter {
         }
         Ok(Self {
             kind,
-            encoder: runtime::load_session(&paths.encoder, threads)?,
-            decoder: runtime::load_session(&paths.decoder, threads)?,
+            encoder: load_checked(&paths.encoder, ModelRole::Encoder, threads)?,
+            decoder: load_checked(&paths.decoder, ModelRole::Decoder, threads)?,
             encoder_path: paths.encoder.clone(),
             decoder_path: paths.decoder.clone(),
+            proposer: None,
             params,
             frames_done: 0,
         })
+    }
+
+    /// Prompts the decoder with the boxes of a proposal model (MobileSAMv2)
+    /// instead of the point grid.
+    pub fn with_box_proposals(mut self, proposer: BoxProposer) -> Self {
+        self.proposer = Some(proposer);
+        self
     }
 
     fn embed(&mut self, input: &SegmenterInput) -> Result<ArrayD<f32>, PerceptionError> {
@@ -81,22 +97,27 @@ impl SamSegmenter {
         Ok(embeddings.to_owned())
     }
 
-    /// Decoder logits [C, H, W] and predicted IoUs [C] for one point prompt.
-    fn decode_point(
+    /// Decoder logits [C, H, W] and predicted IoUs [C] for one prompt:
+    /// `points` in image pixels with SAM's labels (1 = foreground point,
+    /// −1 = padding, 2/3 = box corners).
+    fn decode(
         &mut self,
         embeddings: &ArrayD<f32>,
-        point: [f32; 2],
+        points: &[([f32; 2], f32)],
         input: &SegmenterInput,
     ) -> Result<(ArrayD<f32>, Vec<f32>), PerceptionError> {
         let scale = resize_scale(input.width as usize, input.height as usize);
-        // One positive point plus SAM's padding point (label −1) for "no box".
         let coords = Array3::from_shape_vec(
-            (1, 2, 2),
-            vec![point[0] * scale, point[1] * scale, 0.0, 0.0],
+            (1, points.len(), 2),
+            points
+                .iter()
+                .flat_map(|(p, _)| [p[0] * scale, p[1] * scale])
+                .collect(),
         )
         .map_err(|e| PerceptionError::InvalidInput(e.to_string()))?;
-        let labels = Array2::from_shape_vec((1, 2), vec![1.0f32, -1.0])
-            .map_err(|e| PerceptionError::InvalidInput(e.to_string()))?;
+        let labels =
+            Array2::from_shape_vec((1, points.len()), points.iter().map(|p| p.1).collect())
+                .map_err(|e| PerceptionError::InvalidInput(e.to_string()))?;
         let mask_input = Array4::<f32>::zeros((1, 1, 256, 256));
         let has_mask = Array1::from_vec(vec![0.0f32]);
         let size = Array1::from_vec(vec![input.height as f32, input.width as f32]);
@@ -154,13 +175,33 @@ impl Segmenter for SamSegmenter {
         let (w, h) = (input.width as usize, input.height as usize);
         let embeddings = self.embed(input)?;
         let mut candidates = Vec::new();
-        for point in amg::point_grid(self.params.points_per_side, w, h) {
-            let (masks, ious) = self.decode_point(&embeddings, point, input)?;
-            for (c, &iou) in ious.iter().enumerate() {
-                let logits = masks.index_axis(ndarray::Axis(0), c);
-                let logits = logits.as_slice().unwrap_or(&[]);
-                if let Some(m) = amg::candidate(logits, w, iou, &self.params) {
-                    candidates.push(m);
+        if let Some(proposer) = &mut self.proposer {
+            // MobileSAMv2: one box prompt per proposed object; of the
+            // decoder's masks, the one of highest predicted IoU that passes
+            // the filters.
+            let boxes = proposer.propose(input)?;
+            for b in boxes {
+                let prompt = [([b[0], b[1]], 2.0), ([b[2], b[3]], 3.0)];
+                let (masks, ious) = self.decode(&embeddings, &prompt, input)?;
+                let mut order: Vec<usize> = (0..ious.len()).collect();
+                order.sort_by(|&a, &b| ious[b].total_cmp(&ious[a]));
+                let best = order.into_iter().find_map(|c| {
+                    let logits = masks.index_axis(ndarray::Axis(0), c);
+                    amg::candidate(logits.as_slice().unwrap_or(&[]), w, ious[c], &self.params)
+                });
+                candidates.extend(best);
+            }
+        } else {
+            for point in amg::point_grid(self.params.points_per_side, w, h) {
+                // One positive point plus SAM's padding point (label −1) for "no box".
+                let prompt = [(point, 1.0), ([0.0, 0.0], -1.0)];
+                let (masks, ious) = self.decode(&embeddings, &prompt, input)?;
+                for (c, &iou) in ious.iter().enumerate() {
+                    let logits = masks.index_axis(ndarray::Axis(0), c);
+                    let logits = logits.as_slice().unwrap_or(&[]);
+                    if let Some(m) = amg::candidate(logits, w, iou, &self.params) {
+                        candidates.push(m);
+                    }
                 }
             }
         }
@@ -171,14 +212,14 @@ impl Segmenter for SamSegmenter {
     }
 }
 
-fn tensor<'a, D: ndarray::Dimension + 'static>(
+pub(crate) fn tensor<'a, D: ndarray::Dimension + 'static>(
     array: &'a ndarray::Array<f32, D>,
     path: &Path,
 ) -> Result<TensorRef<'a, f32>, PerceptionError> {
     TensorRef::from_array_view(array).map_err(|e| model_error(path, e))
 }
 
-fn model_error(path: &Path, e: impl std::fmt::Display) -> PerceptionError {
+pub(crate) fn model_error(path: &Path, e: impl std::fmt::Display) -> PerceptionError {
     PerceptionError::Model {
         path: path.to_path_buf(),
         message: e.to_string(),
