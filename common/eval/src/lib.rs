@@ -1,6 +1,8 @@
 //! Evaluation metrics (METHOD.md §9).
 
 pub mod ate;
+pub mod label_png;
+pub mod segmentation;
 pub mod trajectory;
 
 pub use ate::{
@@ -11,3 +13,5 @@ pub use trajectory::{
     format_tum_trajectory, parse_tum_trajectory, read_tum_trajectory, write_tum_trajectory,
     TimedPose, TrajectoryError,
 };
+pub use label_png::{read_label_png, write_label_png};
+pub use segmentation::{InstanceScore, LabelConfusion, SegmentationScore};

@@ -2,6 +2,7 @@
 //! starts, watches, restarts and stops stage processes, the sensor loop, and
 //! the run recorder. Stage binaries in `services/` call into this crate.
 
+pub mod consensus_stage;
 pub mod dataset_args;
 pub mod deploy;
 pub mod logging;
@@ -9,6 +10,7 @@ pub mod mapper_stage;
 pub mod metrics;
 pub mod recorder;
 pub mod segmenter_stage;
+pub mod semantic_eval;
 pub mod sensor;
 pub mod stage_main;
 pub mod stage_process;

@@ -2,19 +2,23 @@
 //! continuously; the trackable Gaussians out to the tracker; the map
 //! checkpointed to the run directory and written as `map.ply` at the end.
 
+use std::collections::VecDeque;
+use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
 use opengs_geometry::{pose_from_tum, Intrinsics};
-use opengs_ipc_schema::service::{KEYFRAMES, MAP_TARGET};
+use opengs_ipc_schema::service::{CONSENSUS, KEYFRAMES, MAP_TARGET, RENDERS, SEGMENTS};
 use opengs_ipc_schema::{
-    now_ns, KeyframeHeader, MapTargetHeader, MapTargetParts, MessageKind, Stamp,
+    now_ns, ConsensusHeader, KeyframeHeader, LabelCompleteness, MapTargetHeader, MapTargetParts,
+    MessageKind, RenderHeader, SegmentsHeader, Stamp,
 };
-use opengs_mapping::{DensifyInput, Mapper, MapperConfig, StoredKeyframe};
+use opengs_mapping::{ConsensusUpdate, DensifyInput, Mapper, MapperConfig, StoredKeyframe};
+use opengs_semantics::{CounterPruneRegion, RelabelInstruction};
 use opengs_runtime::{
     waitset, CallbackProgression, Inlet, Outlet, RunContext, TelemetrySink, WaitSetRunResult,
 };
-use opengs_splat::{read_ply_file, write_ply_file, GaussianMap};
+use opengs_splat::{read_ply_file, write_ply_file, Camera, GaussianMap};
 
 /// Options of the mapper stage.
 #[derive(clap::Args, Debug, Clone)]
@@ -28,7 +32,17 @@ pub struct MapperArgs {
     /// Threads for rendering and optimisation.
     #[arg(long, default_value_t = 2)]
     pub threads: usize,
+    /// K of the per-pixel top-K kept from each render for the consensus (METHOD §3).
+    #[arg(long, default_value_t = opengs_splat::DEFAULT_TOP_K)]
+    pub top_k: usize,
 }
+
+/// Full-resolution cameras of the newest keyframes, for renders the consensus asks for.
+const KEPT_CAMERAS: usize = 32;
+/// A consensus not back by then is given up on (dropped or refused), and renders go on.
+const CONSENSUS_TIMEOUT: Duration = Duration::from_secs(5);
+/// Keyframe seqs, one per line, appended as keyframes arrive (held-out frames for evaluation).
+pub const KEYFRAME_LIST: &str = "keyframes.txt";
 
 const CHECKPOINT: &str = "map_checkpoint.ply";
 
@@ -43,6 +57,14 @@ fn write_map_atomically(map: &GaussianMap, path: &Path) -> anyhow::Result<()> {
 struct MapperStage {
     mapper: Mapper,
     map_target: Outlet<MapTargetHeader>,
+    renders: Outlet<RenderHeader>,
+    /// Newest segmented keyframe not rendered yet (header only: seq and size).
+    waiting_segments: Option<SegmentsHeader>,
+    /// Render sent, consensus not back yet: the next render waits for it, so it shows the
+    /// labels this consensus sets (keyframe N+1 must see the result of N).
+    outstanding: Option<(u64, Instant)>,
+    cameras: VecDeque<(u64, Camera)>,
+    top_k: usize,
     telemetry: TelemetrySink,
     map_version: u32,
     out_dir: PathBuf,
@@ -76,6 +98,12 @@ impl MapperStage {
             h.depth_scale,
             self.mapper.config(),
         );
+        self.cameras
+            .push_back((h.stamp.seq, Camera::from_pose(k, &pose, self.mapper.config().near)));
+        while self.cameras.len() > KEPT_CAMERAS {
+            self.cameras.pop_front();
+        }
+        self.record_keyframe(h.stamp.seq);
         let input = DensifyInput {
             points: view.points,
             covariances: view.covariances,
@@ -115,6 +143,130 @@ impl MapperStage {
         Ok(())
     }
 
+    fn record_keyframe(&self, seq: u64) {
+        let appended = std::fs::OpenOptions::new()
+            .create(true)
+            .append(true)
+            .open(self.out_dir.join(KEYFRAME_LIST))
+            .and_then(|mut f| writeln!(f, "{seq}"));
+        if let Err(e) = appended {
+            tracing::warn!("{KEYFRAME_LIST}: {e}");
+        }
+    }
+
+    /// A keyframe was segmented: render the map there for the consensus (GS Voting labels,
+    /// per-label completeness); the top-K stays here until the consensus comes back.
+    fn handle_segments(
+        &mut self,
+        pool: &rayon::ThreadPool,
+        h: &SegmentsHeader,
+    ) -> anyhow::Result<()> {
+        let seq = h.stamp.seq;
+        let Some(camera) = self.cameras.iter().find(|(s, _)| *s == seq).map(|c| c.1) else {
+            tracing::warn!("segments #{seq}: keyframe unknown here, no render");
+            return Ok(());
+        };
+        if (camera.width(), camera.height()) != (h.width, h.height) {
+            tracing::error!(
+                "segments #{seq}: {}x{} label map for a {}x{} keyframe",
+                h.width,
+                h.height,
+                camera.width(),
+                camera.height()
+            );
+            return Ok(());
+        }
+        let start = now_ns();
+        let (mapper, k) = (&mut self.mapper, self.top_k);
+        let r = pool.install(|| mapper.render_for_consensus(seq, &camera, k));
+        let labels: Vec<LabelCompleteness> = r
+            .visibility
+            .iter()
+            .map(|v| LabelCompleteness {
+                label: v.label,
+                visible: v.visible,
+                total: v.total,
+                confidence: 0.0,
+            })
+            .collect();
+        let mut stamp = Stamp::derived(MessageKind::Render, &h.stamp);
+        stamp.stage_start_ns = start;
+        let header = RenderHeader::new(stamp, h.width, h.height, labels.len() as u32);
+        let label_map = &r.label_map;
+        self.renders
+            .send(header, |hd, buf| hd.encode(label_map, &labels, buf))?;
+        self.outstanding = Some((seq, Instant::now()));
+        Ok(())
+    }
+
+    /// Applies a consensus result: relabels via the kept top-K, counter pruning, labels for
+    /// unlabelled Gaussians.
+    fn handle_consensus(&mut self, h: &ConsensusHeader, payload: &[u8]) {
+        let start = now_ns();
+        let seq = h.stamp.seq;
+        if self.outstanding.is_some_and(|(s, _)| s <= seq) {
+            self.outstanding = None;
+        }
+        let view = match h.decode(payload) {
+            Ok(v) => v,
+            Err(e) => {
+                tracing::error!("consensus #{seq} rejected: {e}");
+                self.telemetry.dropped(&h.stamp);
+                return;
+            }
+        };
+        let res = &view.result;
+        let pixels = |offset: u32, count: u32| {
+            res.pixels[offset as usize..(offset + count) as usize].to_vec()
+        };
+        let relabels: Vec<RelabelInstruction> = res
+            .relabels
+            .iter()
+            .map(|r| RelabelInstruction {
+                from: r.from,
+                to: r.to,
+                pixels: pixels(r.offset, r.count),
+            })
+            .collect();
+        let regions: Vec<CounterPruneRegion> = res
+            .prunes
+            .iter()
+            .map(|r| CounterPruneRegion {
+                label: r.from,
+                pixels: pixels(r.offset, r.count),
+            })
+            .collect();
+        // Prune runs carry θ (f32 bits); every run of one result carries the same.
+        let theta = res.prunes.first().map_or(f32::INFINITY, |r| f32::from_bits(r.to));
+        if !(theta.is_finite() && theta > 0.0) && !res.prunes.is_empty() {
+            tracing::error!("consensus #{seq} rejected: counter-pruning scale {theta} is not > 0");
+            self.telemetry.dropped(&h.stamp);
+            return;
+        }
+        let update = ConsensusUpdate {
+            seq,
+            consistent_label_map: res.label_map,
+            relabels: &relabels,
+            counter_regions: &regions,
+            counter_prune_scale: theta,
+        };
+        match self.mapper.apply_consensus(&update) {
+            Ok(done) => {
+                tracing::info!(
+                    "consensus #{seq}: {} relabelled, {} labelled, {} counter Gaussians pruned",
+                    done.relabelled,
+                    done.labelled,
+                    done.pruned
+                );
+                self.telemetry.processed(&h.stamp, start, now_ns());
+            }
+            Err(e) => {
+                tracing::warn!("{e}");
+                self.telemetry.dropped(&h.stamp);
+            }
+        }
+    }
+
     fn checkpoint(&self) {
         if self.mapper.map().is_empty() {
             return;
@@ -129,6 +281,8 @@ impl MapperStage {
 pub fn run_mapper(ctx: &RunContext, out_dir: &Path, args: &MapperArgs) -> anyhow::Result<()> {
     let node = ctx.node("mapper")?;
     let keyframes = Inlet::<KeyframeHeader>::new(ctx, &node, &KEYFRAMES)?;
+    let segments = Inlet::<SegmentsHeader>::new(ctx, &node, &SEGMENTS)?;
+    let consensus = Inlet::<ConsensusHeader>::new(ctx, &node, &CONSENSUS)?;
     let config = MapperConfig {
         half_resolution: !args.full_resolution,
         ..MapperConfig::default()
@@ -148,6 +302,11 @@ pub fn run_mapper(ctx: &RunContext, out_dir: &Path, args: &MapperArgs) -> anyhow
     let mut stage = MapperStage {
         mapper,
         map_target: Outlet::new(ctx, &node, &MAP_TARGET, 1 << 20)?,
+        renders: Outlet::new(ctx, &node, &RENDERS, 640 * 480 * 4 + (1 << 16))?,
+        waiting_segments: None,
+        outstanding: None,
+        cameras: VecDeque::new(),
+        top_k: args.top_k.max(1),
         telemetry: TelemetrySink::new(ctx, &node, "mapper")?,
         map_version: 0,
         out_dir: out_dir.to_path_buf(),
@@ -158,6 +317,12 @@ pub fn run_mapper(ctx: &RunContext, out_dir: &Path, args: &MapperArgs) -> anyhow
     let ws = waitset()?;
     let _guard = ws
         .attach_notification(keyframes.listener())
+        .map_err(|e| anyhow::anyhow!("WaitSet: {e:?}"))?;
+    let _segments_guard = ws
+        .attach_notification(segments.listener())
+        .map_err(|e| anyhow::anyhow!("WaitSet: {e:?}"))?;
+    let _consensus_guard = ws
+        .attach_notification(consensus.listener())
         .map_err(|e| anyhow::anyhow!("WaitSet: {e:?}"))?;
     let _tick = ws
         .attach_interval(Duration::from_secs(3600))
@@ -178,8 +343,25 @@ pub fn run_mapper(ctx: &RunContext, out_dir: &Path, args: &MapperArgs) -> anyhow
             Ok(_) => {}
         }
         keyframes.clear_wakeups();
+        segments.clear_wakeups();
+        consensus.clear_wakeups();
         while let Some(sample) = keyframes.receive()? {
             stage.handle_keyframe(&pool, sample.user_header(), sample.payload())?;
+        }
+        while let Some(sample) = consensus.receive()? {
+            stage.handle_consensus(sample.user_header(), sample.payload());
+        }
+        // Only the newest segmented keyframe is worth a render.
+        if let (Some(sample), _) = segments.receive_newest()? {
+            stage.waiting_segments = Some(*sample.user_header());
+        }
+        if stage
+            .outstanding
+            .is_none_or(|(_, since)| since.elapsed() > CONSENSUS_TIMEOUT)
+        {
+            if let Some(h) = stage.waiting_segments.take() {
+                stage.handle_segments(&pool, &h)?;
+            }
         }
         let mapper = &mut stage.mapper;
         pool.install(|| mapper.step());

@@ -55,6 +55,7 @@ pub struct RunSummary {
     pub recorder: Recorder,
     pub metrics: Option<crate::metrics::RunMetrics>,
     pub quality: Option<opengs_quality::QualityReport>,
+    pub semantics: Option<crate::semantic_eval::SemanticReport>,
 }
 
 /// Why the main loop ended.
@@ -164,6 +165,32 @@ impl Supervisor {
         } else {
             None
         };
+        let semantics = if opts.quality_every > 0
+            && opts.out_dir.join("map.ply").exists()
+            && !state.recorder.is_empty()
+        {
+            eprintln!("scoring labels (mIoU) ...");
+            let scored = opts
+                .dataset
+                .spec()
+                .and_then(|spec| Ok(opengs_datasets::open_dataset(&spec)?))
+                .and_then(|mut source| {
+                    crate::semantic_eval::evaluate_run_semantics(
+                        &opts.out_dir,
+                        source.as_mut(),
+                        opts.quality_every,
+                    )
+                });
+            match scored {
+                Ok(s) => Some(s),
+                Err(e) => {
+                    eprintln!("semantic scores: {e:#}");
+                    None
+                }
+            }
+        } else {
+            None
+        };
         let latency = state.profile.report();
         let summary = RunSummary {
             out_dir: opts.out_dir.clone(),
@@ -183,6 +210,7 @@ impl Supervisor {
             recorder: std::mem::take(&mut state.recorder),
             metrics,
             quality,
+            semantics,
         };
         match ending? {
             Ending::StageFailed(why) => Err(anyhow::anyhow!(

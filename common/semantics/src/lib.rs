@@ -41,6 +41,7 @@
 //! - `process` validates everything before it changes state: on error the table is untouched.
 
 mod actions;
+pub mod bench;
 mod confidence;
 mod config;
 mod consensus;

@@ -1,0 +1,404 @@
+//! The consensus stage: joins the segmenter's segments and the mapper's GS Voting render of
+//! the same keyframe (by seq), runs METHOD §5, and sends the result to the mapper. It owns
+//! the global Label-Class table and keeps it in the run directory (`label_table.json`), so a
+//! restarted consensus resumes with the labels the map already carries.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use opengs_datasets::DatasetKind;
+use opengs_ipc_schema::service::{CONSENSUS, RENDERS, SEGMENTS};
+use opengs_ipc_schema::{
+    now_ns, ConsensusHeader, ConsensusResult, MessageKind, PixelRun, RenderHeader,
+    SegmentsHeader, Stamp,
+};
+use opengs_runtime::{
+    waitset, CallbackProgression, Inlet, Outlet, RunContext, TelemetrySink, WaitSetRunResult,
+};
+use opengs_semantics::{
+    ConsensusConfig, ConsensusOutput, GlobalLabelTable, InputLabelClass, LabelConsensus,
+    LabelTarget, RenderedInput, SegmenterInput,
+};
+
+use crate::DatasetArgs;
+
+/// A module of the consensus that can be switched off (the paper's ablation, Table IV).
+#[derive(clap::ValueEnum, Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+pub enum Ablation {
+    /// No segmentation counter pruning (§5.3).
+    NoCounterPruning,
+    /// No input confidence update from completeness (§5.2).
+    NoConfidenceUpdate,
+    /// No part label decay (§5.1).
+    NoPartDecay,
+}
+
+impl Ablation {
+    pub const ALL: [Ablation; 3] = [
+        Self::NoCounterPruning,
+        Self::NoConfidenceUpdate,
+        Self::NoPartDecay,
+    ];
+
+    pub fn as_str(&self) -> &'static str {
+        match self {
+            Self::NoCounterPruning => "no-counter-pruning",
+            Self::NoConfidenceUpdate => "no-confidence-update",
+            Self::NoPartDecay => "no-part-decay",
+        }
+    }
+
+    fn apply(&self, config: &mut ConsensusConfig) {
+        match self {
+            Self::NoCounterPruning => config.enable_counter_pruning = false,
+            Self::NoConfidenceUpdate => config.enable_confidence_update = false,
+            Self::NoPartDecay => config.enable_part_decay = false,
+        }
+    }
+}
+
+/// Options of the consensus stage.
+#[derive(clap::Args, Debug, Clone)]
+pub struct ConsensusArgs {
+    /// Switch a module off (repeatable).
+    #[arg(long, value_enum)]
+    pub ablation: Vec<Ablation>,
+    /// θ (m): counter Gaussians larger than this are pruned. Default: 0.25 for TUM, 0.10
+    /// otherwise (METHOD §5.3).
+    #[arg(long)]
+    pub counter_prune_scale: Option<f32>,
+    /// Don't save each segmenter label map as segments/NNNNNN.png (used for `miou_raw`).
+    #[arg(long)]
+    pub no_segment_pngs: bool,
+    #[command(flatten)]
+    pub dataset: DatasetArgs,
+}
+
+impl ConsensusArgs {
+    pub fn config(&self) -> anyhow::Result<ConsensusConfig> {
+        let theta = match self.counter_prune_scale {
+            Some(theta) => theta,
+            None if matches!(self.dataset.spec()?.kind, DatasetKind::Tum(_)) => 0.25,
+            None => 0.10,
+        };
+        let mut config = ConsensusConfig {
+            counter_prune_scale: theta,
+            ..ConsensusConfig::default()
+        };
+        for a in &self.ablation {
+            a.apply(&mut config);
+        }
+        config.validate()?;
+        Ok(config)
+    }
+}
+
+/// File the table is kept in, beside the run's other outputs.
+pub const LABEL_TABLE: &str = "label_table.json";
+
+/// Owned copy of one segments message.
+struct OwnedSegments {
+    stamp: Stamp,
+    width: usize,
+    height: usize,
+    label_map: Vec<u32>,
+    confidence: BTreeMap<u32, f32>,
+    classes: BTreeMap<u32, InputLabelClass>,
+}
+
+/// Owned copy of one render message.
+struct OwnedRender {
+    label_map: Vec<u32>,
+    completeness: BTreeMap<u32, f32>,
+}
+
+/// Messages kept per side while their partner is missing.
+const MAX_WAITING: usize = 4;
+
+struct ConsensusStage {
+    consensus: LabelConsensus,
+    segments: BTreeMap<u64, OwnedSegments>,
+    renders: BTreeMap<u64, OwnedRender>,
+    out: Outlet<ConsensusHeader>,
+    telemetry: TelemetrySink,
+    out_dir: PathBuf,
+    save_pngs: bool,
+}
+
+impl ConsensusStage {
+    fn take_segments(&mut self, h: &SegmentsHeader, payload: &[u8]) {
+        let view = match h.decode(payload) {
+            Ok(v) => v,
+            Err(e) => {
+                tracing::error!("segments #{} rejected: {e}", h.stamp.seq);
+                self.telemetry.dropped(&h.stamp);
+                return;
+            }
+        };
+        let mut confidence = BTreeMap::new();
+        let mut classes = BTreeMap::new();
+        for l in view.labels {
+            confidence.insert(l.label, l.confidence);
+            classes.insert(
+                l.label,
+                InputLabelClass {
+                    class: l.class().map(str::to_string),
+                    score: l.score,
+                },
+            );
+        }
+        let seg = OwnedSegments {
+            stamp: h.stamp,
+            width: h.width as usize,
+            height: h.height as usize,
+            label_map: view.label_map.to_vec(),
+            confidence,
+            classes,
+        };
+        if self.save_pngs {
+            let path = self
+                .out_dir
+                .join("segments")
+                .join(format!("{:06}.png", h.stamp.seq));
+            let saved = std::fs::create_dir_all(path.parent().unwrap_or(Path::new(".")))
+                .map_err(|e| e.to_string())
+                .and_then(|_| {
+                    opengs_eval::write_label_png(&path, h.width, h.height, &seg.label_map)
+                });
+            if let Err(e) = saved {
+                tracing::warn!("segments #{}: {e}", h.stamp.seq);
+            }
+        }
+        insert_bounded(&mut self.segments, h.stamp.seq, seg);
+    }
+
+    fn take_render(&mut self, h: &RenderHeader, payload: &[u8]) {
+        let view = match h.decode(payload) {
+            Ok(v) => v,
+            Err(e) => {
+                tracing::error!("render #{} rejected: {e}", h.stamp.seq);
+                self.telemetry.dropped(&h.stamp);
+                return;
+            }
+        };
+        let completeness = view
+            .labels
+            .iter()
+            .filter(|c| c.total > 0)
+            .map(|c| (c.label, c.visible as f32 / c.total as f32))
+            .collect();
+        let render = OwnedRender {
+            label_map: view.label_map.to_vec(),
+            completeness,
+        };
+        insert_bounded(&mut self.renders, h.stamp.seq, render);
+    }
+
+    /// Runs every keyframe that has both halves, oldest first; drops what is older.
+    fn run_joined(&mut self) -> anyhow::Result<()> {
+        while let Some(seq) = self
+            .segments
+            .keys()
+            .find(|s| self.renders.contains_key(s))
+            .copied()
+        {
+            let (Some(seg), Some(render)) = (self.segments.remove(&seq), self.renders.remove(&seq))
+            else {
+                break;
+            };
+            self.segments.retain(|&s, _| s > seq);
+            self.renders.retain(|&s, _| s > seq);
+            self.process(&seg, &render)?;
+        }
+        Ok(())
+    }
+
+    fn process(&mut self, seg: &OwnedSegments, render: &OwnedRender) -> anyhow::Result<()> {
+        let start = now_ns();
+        let seq = seg.stamp.seq;
+        let input = SegmenterInput {
+            width: seg.width,
+            height: seg.height,
+            label_map: &seg.label_map,
+            confidence: &seg.confidence,
+            classes: &seg.classes,
+        };
+        let rendered = RenderedInput {
+            label_map: &render.label_map,
+            completeness: &render.completeness,
+        };
+        let out = match self.consensus.process(&input, &rendered) {
+            Ok(o) => o,
+            Err(e) => {
+                tracing::error!("keyframe #{seq}: consensus refused the inputs: {e}");
+                self.telemetry.dropped(&seg.stamp);
+                return Ok(());
+            }
+        };
+        let wire = WireResult::new(&out, self.consensus.config().counter_prune_scale);
+        let parts = wire.parts(&out.consistent_label_map);
+        let mut stamp = Stamp::derived(MessageKind::Consensus, &seg.stamp);
+        stamp.stage_start_ns = start;
+        let header = ConsensusHeader::new(stamp, seg.width as u32, seg.height as u32, &parts);
+        self.out.send(header, |hd, buf| hd.encode(&parts, buf))?;
+        tracing::info!(
+            "keyframe #{seq}: {} input labels → {} global labels, {} relabel regions, {} counter regions",
+            out.assignments.len(),
+            self.consensus.table().len(),
+            out.relabels.len(),
+            out.counter_pruning.len()
+        );
+        if let Err(e) = save_table(&self.out_dir, self.consensus.table()) {
+            tracing::error!("saving {LABEL_TABLE}: {e:#}");
+        }
+        self.telemetry.processed(&seg.stamp, start, now_ns());
+        Ok(())
+    }
+}
+
+fn insert_bounded<T>(map: &mut BTreeMap<u64, T>, seq: u64, value: T) {
+    map.insert(seq, value);
+    while map.len() > MAX_WAITING {
+        map.pop_first();
+    }
+}
+
+/// A consensus output laid out as the wire message wants it (runs over one pixel list).
+struct WireResult {
+    mapping: Vec<[u32; 2]>,
+    relabels: Vec<PixelRun>,
+    prunes: Vec<PixelRun>,
+    pixels: Vec<u32>,
+}
+
+impl WireResult {
+    /// Prune runs carry θ (f32 bits) in `to`: the mapper applies it.
+    fn new(out: &ConsensusOutput, theta: f32) -> Self {
+        let mapping = out
+            .assignments
+            .iter()
+            .map(|a| match a.target {
+                LabelTarget::Label(t) => [a.input_label, t],
+                LabelTarget::Background | LabelTarget::RenderedParts(_) => [a.input_label, 0],
+            })
+            .collect();
+        let mut pixels = Vec::new();
+        let mut run = |from: u32, to: u32, px: &[u32]| {
+            let r = PixelRun {
+                from,
+                to,
+                offset: pixels.len() as u32,
+                count: px.len() as u32,
+            };
+            pixels.extend_from_slice(px);
+            r
+        };
+        let relabels = out
+            .relabels
+            .iter()
+            .map(|r| run(r.from, r.to, &r.pixels))
+            .collect();
+        let prunes = out
+            .counter_pruning
+            .iter()
+            .map(|r| run(r.label, theta.to_bits(), &r.pixels))
+            .collect();
+        Self {
+            mapping,
+            relabels,
+            prunes,
+            pixels,
+        }
+    }
+
+    fn parts<'a>(&'a self, label_map: &'a [u32]) -> ConsensusResult<'a> {
+        ConsensusResult {
+            label_map,
+            mapping: &self.mapping,
+            relabels: &self.relabels,
+            prunes: &self.prunes,
+            pixels: &self.pixels,
+        }
+    }
+}
+
+/// Table and config as kept in `label_table.json`.
+#[derive(serde::Serialize, serde::Deserialize)]
+struct SavedTable {
+    table: GlobalLabelTable,
+}
+
+fn save_table(out_dir: &Path, table: &GlobalLabelTable) -> anyhow::Result<()> {
+    let path = out_dir.join(LABEL_TABLE);
+    let tmp = path.with_extension("json.tmp");
+    std::fs::write(&tmp, serde_json::to_vec_pretty(&SavedTable { table: table.clone() })?)?;
+    std::fs::rename(&tmp, &path)?;
+    Ok(())
+}
+
+/// The global table saved by a consensus stage in `run_dir`, if any.
+pub fn load_label_table(run_dir: &Path) -> anyhow::Result<Option<GlobalLabelTable>> {
+    let path = run_dir.join(LABEL_TABLE);
+    if !path.exists() {
+        return Ok(None);
+    }
+    let text = std::fs::read_to_string(&path)?;
+    let saved: SavedTable = serde_json::from_str(&text)
+        .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+    Ok(Some(saved.table))
+}
+
+/// Runs the consensus stage until a termination signal.
+pub fn run_consensus(ctx: &RunContext, out_dir: &Path, args: &ConsensusArgs) -> anyhow::Result<()> {
+    let config = args.config()?;
+    let consensus = match load_label_table(out_dir)? {
+        Some(table) => {
+            tracing::info!("resuming with {} global labels", table.len());
+            LabelConsensus::with_table(config, table)?
+        }
+        None => LabelConsensus::new(config)?,
+    };
+    std::fs::create_dir_all(out_dir)?;
+    let node = ctx.node("consensus")?;
+    let segments = Inlet::<SegmentsHeader>::new(ctx, &node, &SEGMENTS)?;
+    let renders = Inlet::<RenderHeader>::new(ctx, &node, &RENDERS)?;
+    let mut stage = ConsensusStage {
+        consensus,
+        segments: BTreeMap::new(),
+        renders: BTreeMap::new(),
+        out: Outlet::new(ctx, &node, &CONSENSUS, 640 * 480 * 16 + (1 << 20))?,
+        telemetry: TelemetrySink::new(ctx, &node, "consensus")?,
+        out_dir: out_dir.to_path_buf(),
+        save_pngs: !args.no_segment_pngs,
+    };
+    let ws = waitset()?;
+    let _g1 = ws
+        .attach_notification(segments.listener())
+        .map_err(|e| anyhow::anyhow!("WaitSet: {e:?}"))?;
+    let _g2 = ws
+        .attach_notification(renders.listener())
+        .map_err(|e| anyhow::anyhow!("WaitSet: {e:?}"))?;
+    stage.telemetry.ready();
+    loop {
+        match ws.wait_and_process_once(|_| CallbackProgression::Continue) {
+            Ok(WaitSetRunResult::TerminationRequest | WaitSetRunResult::Interrupt) => break,
+            Err(e) => anyhow::bail!("WaitSet: {e:?}"),
+            Ok(_) => {}
+        }
+        segments.clear_wakeups();
+        renders.clear_wakeups();
+        while let Some(s) = segments.receive()? {
+            stage.take_segments(s.user_header(), s.payload());
+        }
+        while let Some(r) = renders.receive()? {
+            stage.take_render(r.user_header(), r.payload());
+        }
+        stage.run_joined()?;
+    }
+    save_table(out_dir, stage.consensus.table())?;
+    tracing::info!(
+        "consensus: {} global labels",
+        stage.consensus.table().len()
+    );
+    Ok(())
+}

@@ -1,0 +1,209 @@
+//! Semantic outputs of a finished run (METHOD §9): `labels.json` (the global Label-Class
+//! table with Gaussian counts from map.ply), mIoU / accuracy of label maps rendered from the
+//! map at held-out poses (frames that were not keyframes), and `miou_raw`: the segmenter's
+//! own per-keyframe label maps (segments/*.png) scored the same way. Both use one global
+//! one-to-one matching of labels to ground-truth instances over the sequence.
+
+use std::collections::BTreeSet;
+use std::path::Path;
+
+use image::{ImageBuffer, Rgb};
+use opengs_datasets::{RgbdFrame, RgbdSource};
+use opengs_eval::{read_label_png, read_tum_trajectory, LabelConfusion, SegmentationScore};
+use opengs_quality::{merge_metrics_json, read_map, FrameMatcher, DEFAULT_NEAR};
+use opengs_splat::{label_color, render, Camera, GaussianMap, RenderRequest};
+use serde::Serialize;
+
+use crate::consensus_stage::load_label_table;
+use crate::mapper_stage::KEYFRAME_LIST;
+
+/// Label-map PNGs written per run (evenly spread over the scored frames).
+const LABEL_PNGS: usize = 6;
+
+/// What [`evaluate_run_semantics`] found.
+#[derive(Debug, Clone, Serialize)]
+pub struct SemanticReport {
+    /// Labels rendered from the map at held-out poses.
+    pub map: Option<SegmentationScore>,
+    /// The segmenter's per-keyframe label maps.
+    pub raw: Option<SegmentationScore>,
+    /// Global labels in labels.json.
+    pub labels: usize,
+    /// Labels carried by at least one Gaussian of the final map.
+    pub map_labels: usize,
+}
+
+/// Writes labels.json and semantics.json, merges the scores into metrics.json.
+pub fn evaluate_run_semantics(
+    run_dir: &Path,
+    source: &mut dyn RgbdSource,
+    every_n: usize,
+) -> anyhow::Result<SemanticReport> {
+    let map = read_map(&run_dir.join("map.ply"))?;
+    let counts = map.count_per_label();
+    let labels = match load_label_table(run_dir)? {
+        Some(table) => {
+            let records = table.records(|id| counts.get(&id).copied().unwrap_or(0) as u64);
+            std::fs::write(
+                run_dir.join("labels.json"),
+                serde_json::to_string_pretty(&records)? + "\n",
+            )?;
+            records.len()
+        }
+        None => 0,
+    };
+    let keyframes = read_keyframes(&run_dir.join(KEYFRAME_LIST))?;
+    let map_score = score_map(run_dir, &map, source, every_n, &keyframes)?;
+    let raw = score_segments(&run_dir.join("segments"), source)?;
+    let report = SemanticReport {
+        map: map_score,
+        raw,
+        labels,
+        map_labels: counts.keys().filter(|&&l| l != 0).count(),
+    };
+    std::fs::write(
+        run_dir.join("semantics.json"),
+        serde_json::to_string_pretty(&report)? + "\n",
+    )?;
+    let mut entries = serde_json::Map::new();
+    if let Some(s) = &report.map {
+        entries.insert("miou".into(), s.miou.into());
+        entries.insert("acc".into(), s.acc.into());
+        entries.insert("semantic_frames".into(), s.frames.into());
+    }
+    if let Some(s) = &report.raw {
+        entries.insert("miou_raw".into(), s.miou.into());
+        entries.insert("acc_raw".into(), s.acc.into());
+        entries.insert("semantic_frames_raw".into(), s.frames.into());
+    }
+    entries.insert("labels".into(), report.labels.into());
+    entries.insert("map_labels".into(), report.map_labels.into());
+    merge_metrics_json(&run_dir.join("metrics.json"), entries)?;
+    Ok(report)
+}
+
+/// Keyframe seqs written by the mapper (absent file: none known).
+fn read_keyframes(path: &Path) -> anyhow::Result<BTreeSet<u64>> {
+    let text = match std::fs::read_to_string(path) {
+        Ok(t) => t,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(BTreeSet::new()),
+        Err(e) => return Err(anyhow::anyhow!("{}: {e}", path.display())),
+    };
+    text.lines()
+        .enumerate()
+        .filter(|(_, l)| !l.trim().is_empty())
+        .map(|(i, l)| {
+            l.trim()
+                .parse::<u64>()
+                .map_err(|e| anyhow::anyhow!("{} line {}: {e}", path.display(), i + 1))
+        })
+        .collect()
+}
+
+fn truth_of(frame: &RgbdFrame) -> Option<Vec<u32>> {
+    frame
+        .labels
+        .as_ref()
+        .map(|l| l.iter().map(|&v| u32::from(v)).collect())
+}
+
+/// Renders labels at every `every_n`-th pose of trajectory.txt that is not a keyframe.
+fn score_map(
+    run_dir: &Path,
+    map: &GaussianMap,
+    source: &mut dyn RgbdSource,
+    every_n: usize,
+    keyframes: &BTreeSet<u64>,
+) -> anyhow::Result<Option<SegmentationScore>> {
+    let trajectory = read_tum_trajectory(&run_dir.join("trajectory.txt"))?;
+    let k = source.intrinsics();
+    let mut matcher = FrameMatcher::new(source);
+    let mut confusion = LabelConfusion::new();
+    let mut scored: Vec<(usize, Vec<u32>, Vec<u32>)> = Vec::new();
+    for p in trajectory.iter().step_by(every_n.max(1)) {
+        let Some(frame) = matcher.frame_at(p.timestamp)? else {
+            continue;
+        };
+        if keyframes.contains(&(frame.index as u64)) {
+            continue; // held-out poses only
+        }
+        let Some(truth) = truth_of(&frame) else {
+            return Ok(None); // the dataset has no instance labels
+        };
+        let camera = Camera::from_pose(k, &p.pose, DEFAULT_NEAR);
+        let request = RenderRequest {
+            labels: true,
+            ..RenderRequest::default()
+        };
+        let predicted = render(map, &camera, &request)
+            .output
+            .labels
+            .unwrap_or_default();
+        confusion
+            .add_frame(&predicted, &truth)
+            .map_err(|e| anyhow::anyhow!("frame {}: {e}", frame.index))?;
+        scored.push((frame.index, predicted, truth));
+    }
+    let renders = run_dir.join("renders");
+    let step = (scored.len() / LABEL_PNGS).max(1);
+    for (index, predicted, truth) in scored.iter().step_by(step).take(LABEL_PNGS) {
+        std::fs::create_dir_all(&renders)?;
+        let path = renders.join(format!("labels_{index:06}.png"));
+        write_label_pair_png(&path, k.width, k.height, predicted, truth)?;
+    }
+    Ok(confusion.score())
+}
+
+/// Scores the segmenter's saved label maps against the ground truth of their frames.
+fn score_segments(
+    dir: &Path,
+    source: &mut dyn RgbdSource,
+) -> anyhow::Result<Option<SegmentationScore>> {
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return Ok(None);
+    };
+    let mut files: Vec<(usize, std::path::PathBuf)> = entries
+        .filter_map(|e| e.ok())
+        .filter_map(|e| {
+            let path = e.path();
+            let index = path.file_stem()?.to_str()?.parse::<usize>().ok()?;
+            (path.extension()? == "png").then_some((index, path))
+        })
+        .collect();
+    files.sort();
+    let mut confusion = LabelConfusion::new();
+    for (index, path) in files {
+        if index >= source.len() {
+            anyhow::bail!("{}: frame {index} is not in the dataset", path.display());
+        }
+        let frame = source.frame(index)?;
+        let Some(truth) = truth_of(&frame) else {
+            return Ok(None);
+        };
+        let (_, _, predicted) = read_label_png(&path).map_err(|e| anyhow::anyhow!(e))?;
+        confusion
+            .add_frame(&predicted, &truth)
+            .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+    }
+    Ok(confusion.score())
+}
+
+/// Rendered labels | ground-truth instances, each colourised with the stable label colours.
+fn write_label_pair_png(
+    path: &Path,
+    width: u32,
+    height: u32,
+    predicted: &[u32],
+    truth: &[u32],
+) -> anyhow::Result<()> {
+    let img = ImageBuffer::from_fn(width * 2, height, |x, y| {
+        let (map, x) = if x < width {
+            (predicted, x)
+        } else {
+            (truth, x - width)
+        };
+        Rgb(label_color(map[(y * width + x) as usize]))
+    });
+    img.save(path)
+        .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))
+}
