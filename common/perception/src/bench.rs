@@ -1,18 +1,77 @@
-//! Timing of the weight-free segmenters on synthetic 640×480 frames.
+//! Timing of the segmenters on synthetic 640×480 frames: the weight-free
+//! ones, and (cargo feature `onnx`, ONNX Runtime available) the tiny-model
+//! ensemble — MobileSAMv2-style box prompts plus tagger and detector on the
+//! test fixtures, i.e. the pipeline's own overhead without real weights.
 
 use std::time::Instant;
 
-use opengs_datasets::{open_dataset, DatasetKind, DatasetSpec};
+use opengs_datasets::{open_dataset, DatasetKind, DatasetSpec, RgbdFrame};
 
-use crate::{PerceptionError, SegmenterInput, SegmenterKind};
+use crate::{PerceptionError, Segmenter, SegmenterInput, SegmenterKind};
 
 /// Median and minimum wall time of one segmenter over the bench frames.
 #[derive(Debug, Clone, PartialEq)]
 pub struct SegmentTiming {
-    pub segmenter: SegmenterKind,
+    /// Segmenter as printed (`classic`, `prior`, `tiny-ensemble`).
+    pub name: String,
     pub frames: usize,
     pub median_ms: f64,
     pub min_ms: f64,
+    /// Segments per frame, and of those the ones with a class name (means).
+    pub segments: f64,
+    pub classified: f64,
+}
+
+struct BenchFrames {
+    frames: Vec<RgbdFrame>,
+    intrinsics: opengs_geometry::Intrinsics,
+    classes: Vec<opengs_datasets::InstanceClass>,
+}
+
+/// `frames` synthetic frames spread over the loop.
+fn bench_frames(frames: usize) -> Result<BenchFrames, PerceptionError> {
+    let mut source = open_dataset(&DatasetSpec::new(DatasetKind::Synthetic))?;
+    let step = (source.len() / frames.max(1)).max(1);
+    let list = (0..frames.max(1))
+        .map(|i| source.frame((i * step) % source.len()))
+        .collect::<Result<_, _>>()?;
+    Ok(BenchFrames {
+        frames: list,
+        intrinsics: source.intrinsics(),
+        classes: source.class_table(),
+    })
+}
+
+/// Segments every frame `repeats` times after one warm-up run per frame.
+fn time_one(
+    name: &str,
+    segmenter: &mut dyn Segmenter,
+    bench: &BenchFrames,
+    repeats: usize,
+) -> Result<SegmentTiming, PerceptionError> {
+    let mut times = Vec::new();
+    let (mut segments, mut classified) = (0usize, 0usize);
+    for frame in &bench.frames {
+        let input = SegmenterInput::from_frame(frame, bench.intrinsics, &bench.classes);
+        let warm = segmenter.segment(&input)?;
+        segments += warm.labels.len();
+        classified += warm.labels.iter().filter(|l| l.class.is_some()).count();
+        for _ in 0..repeats.max(1) {
+            let start = Instant::now();
+            let out = segmenter.segment(&input)?;
+            times.push(start.elapsed().as_secs_f64() * 1e3);
+            std::hint::black_box(out);
+        }
+    }
+    times.sort_unstable_by(f64::total_cmp);
+    Ok(SegmentTiming {
+        name: name.to_string(),
+        frames: bench.frames.len(),
+        median_ms: times[times.len() / 2],
+        min_ms: times[0],
+        segments: segments as f64 / bench.frames.len() as f64,
+        classified: classified as f64 / bench.frames.len() as f64,
+    })
 }
 
 /// Times classic and prior on `frames` synthetic frames spread over the loop,
@@ -21,55 +80,152 @@ pub fn time_segmenters(
     frames: usize,
     repeats: usize,
 ) -> Result<Vec<SegmentTiming>, PerceptionError> {
-    let mut source = open_dataset(&DatasetSpec::new(DatasetKind::Synthetic))?;
-    let k = source.intrinsics();
-    let classes = source.class_table();
-    let step = (source.len() / frames.max(1)).max(1);
-    let frames: Vec<_> = (0..frames.max(1))
-        .map(|i| source.frame((i * step) % source.len()))
-        .collect::<Result<_, _>>()?;
+    let bench = bench_frames(frames)?;
     [SegmenterKind::Classic, SegmenterKind::Prior]
         .into_iter()
-        .map(|kind| {
-            let mut segmenter = kind.create()?;
-            let mut times = Vec::new();
-            for frame in &frames {
-                let input = SegmenterInput::from_frame(frame, k, &classes);
-                segmenter.segment(&input)?;
-                for _ in 0..repeats.max(1) {
-                    let start = Instant::now();
-                    let out = segmenter.segment(&input)?;
-                    times.push(start.elapsed().as_secs_f64() * 1e3);
-                    std::hint::black_box(out);
-                }
-            }
-            times.sort_unstable_by(f64::total_cmp);
-            Ok(SegmentTiming {
-                segmenter: kind,
-                frames: frames.len(),
-                median_ms: times[times.len() / 2],
-                min_ms: times[0],
-            })
-        })
+        .map(|kind| time_one(kind.as_str(), kind.create()?.as_mut(), &bench, repeats))
         .collect()
 }
 
-/// Prints the median milliseconds per 640×480 frame of each segmenter.
+/// Times the tiny-model ensemble (encoder, box proposals, box-prompted
+/// decoder, tagger, detector, mask-box matching) on the same frames.
+#[cfg(feature = "onnx")]
+pub fn time_tiny_ensemble(frames: usize, repeats: usize) -> Result<SegmentTiming, PerceptionError> {
+    let dir = tiny::write_fixtures()?;
+    let result = (|| {
+        let mut segmenter = SegmenterKind::MobileSamV2.create_with(&tiny::options(&dir.0))?;
+        time_one(
+            "tiny-ensemble",
+            segmenter.as_mut(),
+            &bench_frames(frames)?,
+            repeats,
+        )
+    })();
+    drop(dir);
+    result
+}
+
+/// Prints the median milliseconds per 640×480 frame of each segmenter; the
+/// tiny-model ensemble too when built with `onnx` and ONNX Runtime loads
+/// (otherwise a line says why it is left out).
 pub fn print_segment_bench(frames: usize, repeats: usize) -> Result<(), PerceptionError> {
-    for t in time_segmenters(frames, repeats)? {
+    let print = |t: &SegmentTiming| {
         println!(
-            "segment/{:<8} median {:7.2} ms  min {:7.2} ms  per 640x480 frame ({} frames x {} runs, {} cores available)",
-            t.segmenter.as_str(),
+            "segment/{:<13} median {:7.2} ms  min {:7.2} ms  per 640x480 frame ({:.1} segments, {:.1} with a class; {} frames x {} runs, {} cores available)",
+            t.name,
             t.median_ms,
             t.min_ms,
+            t.segments,
+            t.classified,
             t.frames,
             repeats.max(1),
             available_cores(),
-        );
+        )
+    };
+    for t in time_segmenters(frames, repeats)? {
+        print(&t);
     }
+    #[cfg(feature = "onnx")]
+    match time_tiny_ensemble(frames, repeats) {
+        Ok(t) => {
+            print(&t);
+            println!(
+                "  (tiny-ensemble = MobileSAMv2 box prompts + RAM-style tagger + YOLO-World-style detector on the test fixtures: pipeline overhead, not model speed)"
+            );
+        }
+        Err(PerceptionError::Unavailable { reason, .. }) => {
+            println!("segment/tiny-ensemble skipped: {reason}")
+        }
+        Err(e) => return Err(e),
+    }
+    #[cfg(not(feature = "onnx"))]
+    println!(
+        "segment/tiny-ensemble skipped: built without the `onnx` feature (--features opengs-perception/onnx)"
+    );
     Ok(())
 }
 
 fn available_cores() -> usize {
     std::thread::available_parallelism().map_or(1, |n| n.get())
+}
+
+/// The test fixtures, compiled in so the bench runs from any directory.
+#[cfg(feature = "onnx")]
+mod tiny {
+    use std::path::{Path, PathBuf};
+
+    use crate::{EnsembleModelPaths, PerceptionError, SamModelPaths, SegmenterOptions};
+
+    const FILES: [(&str, &[u8]); 7] = [
+        (
+            "tiny_sam_encoder.onnx",
+            include_bytes!("../tests/fixtures/tiny_sam_encoder.onnx"),
+        ),
+        (
+            "tiny_sam_decoder.onnx",
+            include_bytes!("../tests/fixtures/tiny_sam_decoder.onnx"),
+        ),
+        (
+            "tiny_proposals.onnx",
+            include_bytes!("../tests/fixtures/tiny_proposals.onnx"),
+        ),
+        (
+            "tiny_tagger.onnx",
+            include_bytes!("../tests/fixtures/tiny_tagger.onnx"),
+        ),
+        (
+            "tiny_detector.onnx",
+            include_bytes!("../tests/fixtures/tiny_detector.onnx"),
+        ),
+        (
+            "tiny_tag_list.txt",
+            include_bytes!("../tests/fixtures/tiny_tag_list.txt"),
+        ),
+        (
+            "tiny_tag_embeddings.npy",
+            include_bytes!("../tests/fixtures/tiny_tag_embeddings.npy"),
+        ),
+    ];
+
+    /// A temporary directory removed on drop.
+    pub struct Dir(pub PathBuf);
+
+    impl Drop for Dir {
+        fn drop(&mut self) {
+            let _ = std::fs::remove_dir_all(&self.0);
+        }
+    }
+
+    pub fn write_fixtures() -> Result<Dir, PerceptionError> {
+        let dir =
+            Dir(std::env::temp_dir().join(format!("opengs-tiny-models-{}", std::process::id())));
+        let io = |path: &Path, e: std::io::Error| PerceptionError::File {
+            path: path.to_path_buf(),
+            message: e.to_string(),
+        };
+        std::fs::create_dir_all(&dir.0).map_err(|e| io(&dir.0, e))?;
+        for (name, bytes) in FILES {
+            let path = dir.0.join(name);
+            std::fs::write(&path, bytes).map_err(|e| io(&path, e))?;
+        }
+        Ok(dir)
+    }
+
+    pub fn options(dir: &Path) -> SegmenterOptions {
+        SegmenterOptions {
+            sam_models: Some(SamModelPaths {
+                encoder: dir.join("tiny_sam_encoder.onnx"),
+                decoder: dir.join("tiny_sam_decoder.onnx"),
+            }),
+            proposals: Some(dir.join("tiny_proposals.onnx")),
+            ensemble: EnsembleModelPaths {
+                tagger: Some(dir.join("tiny_tagger.onnx")),
+                tag_list: Some(dir.join("tiny_tag_list.txt")),
+                detector: Some(dir.join("tiny_detector.onnx")),
+                text_embeddings: Some(dir.join("tiny_tag_embeddings.npy")),
+            },
+            threads: 2,
+            ..SegmenterOptions::default()
+        }
+    }
 }

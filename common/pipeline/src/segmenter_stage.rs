@@ -27,6 +27,21 @@ pub struct SegmenterArgs {
     /// SAM-family mask decoder ONNX (for sam / mobilesamv2).
     #[arg(long)]
     pub decoder: Option<PathBuf>,
+    /// MobileSAMv2 box-proposal ONNX (YOLOv8 export): box prompts instead of a point grid.
+    #[arg(long)]
+    pub proposals: Option<PathBuf>,
+    /// Ensemble tagger ONNX (RAM/RAM++ export) proposing class names.
+    #[arg(long)]
+    pub tagger: Option<PathBuf>,
+    /// Tag names, one per line, in the tagger's output order (ram_tag_list.txt).
+    #[arg(long)]
+    pub tag_list: Option<PathBuf>,
+    /// Ensemble open-vocabulary detector ONNX (YOLO-World with a text_features input).
+    #[arg(long)]
+    pub detector: Option<PathBuf>,
+    /// The detector's text feature of every tag: .npy float32 [tags, 512].
+    #[arg(long)]
+    pub text_embeddings: Option<PathBuf>,
     #[command(flatten)]
     pub dataset: DatasetArgs,
 }
@@ -41,6 +56,13 @@ pub fn run_segmenter(ctx: &RunContext, args: &SegmenterArgs) -> anyhow::Result<(
                 decoder: d.clone(),
             }),
             _ => None,
+        },
+        proposals: args.proposals.clone(),
+        ensemble: opengs_perception::EnsembleModelPaths {
+            tagger: args.tagger.clone(),
+            tag_list: args.tag_list.clone(),
+            detector: args.detector.clone(),
+            text_embeddings: args.text_embeddings.clone(),
         },
         ..SegmenterOptions::default()
     };

@@ -20,6 +20,8 @@ struct Cli {
 enum Command {
     /// Run the pipeline on a dataset (default: the embedded synthetic room).
     Run(cmd::run::RunArgs),
+    /// Run the four consensus ablation settings on one dataset and print the table.
+    Ablation(cmd::ablation::AblationArgs),
     /// Talk to a running pipeline: status, stop.
     Ctl(cmd::ctl::CtlArgs),
     /// Recompute a finished run's metrics (ATE) from its files.
@@ -34,6 +36,8 @@ enum Command {
     Refine(cmd::refine::RefineArgs),
     /// Register two point clouds (PLY or `x y z` text) with G-ICP.
     Register(cmd::register::RegisterArgs),
+    /// Check exported ONNX models against their role (encoder, decoder, tagger, detector, proposals).
+    Models(cmd::models::ModelsArgs),
     /// Benchmarks that print figures.
     Bench(cmd::bench::BenchArgs),
     /// (internal) subscriber side of `opengs bench ipc`.
@@ -46,6 +50,7 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Run(a) => cmd::run::run(a),
+        Command::Ablation(a) => cmd::ablation::run(a),
         Command::Ctl(a) => cmd::ctl::run(a),
         Command::Eval(a) => cmd::eval::run(a),
         Command::Profile(a) => cmd::profile::run(a),
@@ -53,6 +58,7 @@ fn main() -> ExitCode {
         Command::Render(a) => cmd::render::run(a),
         Command::Refine(a) => cmd::refine::run(a),
         Command::Register(a) => cmd::register::run(a),
+        Command::Models(a) => cmd::models::run(a),
         Command::Bench(a) => cmd::bench::run(a),
         Command::IpcSink(a) => cmd::bench_ipc::run_sink(a),
     };

@@ -75,7 +75,7 @@ impl BoxProposer {
             let score = (4..shape[1])
                 .map(|c| out[[0, c, n]])
                 .fold(f32::NEG_INFINITY, f32::max);
-            if !(score >= self.conf) {
+            if score.is_nan() || score < self.conf {
                 continue;
             }
             let (cx, cy, bw, bh) = (

@@ -25,7 +25,13 @@ enum BenchWhat {
         #[arg(long, default_value_t = 100_000)]
         gaussians: usize,
     },
-    /// Segmenters (classic, prior) per 640×480 synthetic frame.
+    /// Label consensus per 640×480 keyframe with ~100 input and ~100 rendered labels (one core).
+    Consensus {
+        /// Timed keyframes.
+        #[arg(long, default_value_t = 50)]
+        runs: usize,
+    },
+    /// Segmenters (classic, prior, tiny-model ensemble with `onnx`) per 640×480 synthetic frame.
     Segment {
         /// Frames to segment.
         #[arg(long, default_value_t = 8)]
@@ -53,6 +59,10 @@ pub fn run(args: BenchArgs) -> anyhow::Result<()> {
                     opengs_splat::bench_train_steps(gaussians, w, h, steps)
                 );
             }
+            Ok(())
+        }
+        BenchWhat::Consensus { runs } => {
+            opengs_semantics::bench::print_consensus_bench(runs);
             Ok(())
         }
         BenchWhat::Segment { frames, repeats } => Ok(

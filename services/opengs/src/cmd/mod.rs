@@ -1,9 +1,11 @@
+pub mod ablation;
 pub mod bench;
 pub mod bench_gicp;
 pub mod bench_ipc;
 pub mod bench_render;
 pub mod ctl;
 pub mod eval;
+pub mod models;
 pub mod profile;
 pub mod refine;
 pub mod register;
