@@ -13,7 +13,7 @@ pub struct SamModelPaths {
 }
 
 /// The optional ensemble models that put class names on masks (METHOD §6;
-/// export layouts in [`crate::class_match`] and the README's models section).
+/// export layouts in the `ensemble` module and the README's models section).
 #[derive(Debug, Clone, PartialEq, Eq, Default)]
 pub struct EnsembleModelPaths {
     /// RAM/RAM++ tagger: `image[1,3,384,384] → tag[1,T]` (or `logits[1,T]`).
