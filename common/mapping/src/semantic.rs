@@ -24,6 +24,10 @@ use crate::pixel_top_k::PixelTopK;
 /// newest keyframe only, so more would be stale).
 pub const MAX_PENDING_RENDERS: usize = 4;
 
+/// Below this accumulated α a pixel has no surface depth. Low on purpose: fresh Gaussians have
+/// opacity 0.1, and D/S is a depth whatever S is.
+const MIN_SILHOUETTE: f32 = 0.01;
+
 /// Visible and total Gaussians of one label in a keyframe render (completeness, §5.2).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct LabelVisibility {
@@ -39,7 +43,7 @@ pub struct KeyframeRender {
     pub camera: Camera,
     /// Row-major voted labels (0 = nothing rendered).
     pub label_map: Vec<u32>,
-    /// Rendered surface depth D/S (0 where the silhouette is below ½).
+    /// Rendered surface depth D/S (0 where nothing was rendered).
     pub surface_depth: Vec<f32>,
     pub top_k: PixelTopK,
     /// Every non-zero label of the map, visible or not.
@@ -127,7 +131,7 @@ impl Mapper {
             .depth
             .iter()
             .zip(&out.silhouette)
-            .map(|(&d, &s)| if s >= 0.5 { d / s } else { 0.0 })
+            .map(|(&d, &s)| if s > MIN_SILHOUETTE { d / s } else { 0.0 })
             .collect();
         let top_k = out
             .top_k

@@ -351,6 +351,18 @@ pub fn load_label_table(run_dir: &Path) -> anyhow::Result<Option<GlobalLabelTabl
 /// Runs the consensus stage until a termination signal.
 pub fn run_consensus(ctx: &RunContext, out_dir: &Path, args: &ConsensusArgs) -> anyhow::Result<()> {
     let config = args.config()?;
+    let on = |b: bool| if b { "on" } else { "off" };
+    tracing::info!(
+        "consensus: τ1 {} τ2 {} τ3 {} δ {} θ {} m; counter pruning {}, confidence update {}, part decay {}",
+        config.tau_full,
+        config.tau_part,
+        config.tau_min,
+        config.part_decay,
+        config.counter_prune_scale,
+        on(config.enable_counter_pruning),
+        on(config.enable_confidence_update),
+        on(config.enable_part_decay)
+    );
     let consensus = match load_label_table(out_dir)? {
         Some(table) => {
             tracing::info!("resuming with {} global labels", table.len());

@@ -107,7 +107,7 @@ fn truth_of(frame: &RgbdFrame) -> Option<Vec<u32>> {
         .map(|l| l.iter().map(|&v| u32::from(v)).collect())
 }
 
-/// Renders labels at every `every_n`-th pose of trajectory.txt that is not a keyframe.
+/// Renders labels at one held-out pose (not a keyframe) in every `every_n` of trajectory.txt.
 fn score_map(
     run_dir: &Path,
     map: &GaussianMap,
@@ -120,13 +120,21 @@ fn score_map(
     let mut matcher = FrameMatcher::new(source);
     let mut confusion = LabelConfusion::new();
     let mut scored: Vec<(usize, Vec<u32>, Vec<u32>)> = Vec::new();
-    for p in trajectory.iter().step_by(every_n.max(1)) {
-        let Some(frame) = matcher.frame_at(p.timestamp)? else {
+    let every_n = every_n.max(1);
+    for start in (every_n / 2..trajectory.len()).step_by(every_n) {
+        // Held-out poses only: the first non-keyframe at or after `start`.
+        let mut found = None;
+        for p in trajectory.iter().skip(start).take(every_n.div_ceil(2)) {
+            if let Some(frame) = matcher.frame_at(p.timestamp)? {
+                if !keyframes.contains(&(frame.index as u64)) {
+                    found = Some((p, frame));
+                    break;
+                }
+            }
+        }
+        let Some((p, frame)) = found else {
             continue;
         };
-        if keyframes.contains(&(frame.index as u64)) {
-            continue; // held-out poses only
-        }
         let Some(truth) = truth_of(&frame) else {
             return Ok(None); // the dataset has no instance labels
         };

@@ -145,6 +145,7 @@ impl LabelConsensus {
                 LabelTarget::Background => rule.label = 0,
                 LabelTarget::RenderedParts(parts) => {
                     rule.take_parts = true;
+                    rule.label = largest_part(parts, overlap);
                     for &r in parts {
                         rules
                             .rendered
@@ -209,4 +210,13 @@ impl LabelConsensus {
             refused_allocations: d.refused,
         }
     }
+}
+
+/// The part with the largest rendered area (ties: smallest id); 0 without parts.
+fn largest_part(parts: &[u32], overlap: &Overlap) -> u32 {
+    parts
+        .iter()
+        .copied()
+        .max_by_key(|&r| (area(&overlap.rendered_area, r), u32::MAX - r))
+        .unwrap_or(0)
 }

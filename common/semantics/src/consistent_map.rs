@@ -6,9 +6,10 @@ use crate::output::{CounterPruneRegion, RelabelInstruction};
 /// What a pixel with this input label does.
 #[derive(Debug, Clone, Copy, Default)]
 pub(crate) struct InputPixelRule {
-    /// Output label (ignored when `take_parts`).
+    /// Output label (with `take_parts`: the label of pixels where nothing is rendered).
     pub label: u32,
-    /// Whole match lost by the input: take the rendered label if it is one of this label's parts.
+    /// Whole match lost by the input: take the rendered label if it is one of this label's
+    /// parts, `label` (the largest part) where the map renders nothing, else 0.
     pub take_parts: bool,
     /// Relabel region collecting all pixels of this input label.
     pub relabel: Option<usize>,
@@ -55,10 +56,13 @@ pub(crate) fn paint(
             last_r = Some(r);
             ri = rules.rendered.get(&r).copied().unwrap_or_default();
         }
-        // Whole lost by the input: pixels outside every part are uncertain, so they get 0.
+        // Whole lost by the input: parts keep their labels; unmapped pixels follow the input's
+        // grouping (largest part); pixels of another rendered label are uncertain, so 0.
         out.push(if si.take_parts {
             if ri.part_of == Some(s) {
                 r
+            } else if r == 0 {
+                si.label
             } else {
                 0
             }

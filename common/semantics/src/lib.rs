@@ -22,7 +22,9 @@
 //! - Whole, input wins (C_s > C̄r): the parts merge into the *largest* part's id (ties:
 //!   smallest id) so most Gaussians keep their label; each other part is relabelled over *all*
 //!   its rendered pixels; the merged label's confidence becomes C_s. Input loses: a pixel of ℓs
-//!   takes its rendered label if that is one of the parts, else 0.
+//!   takes its rendered label if that is one of the parts; where the map renders nothing it
+//!   takes the largest part (the input's grouping extends the object into unmapped space, so
+//!   new Gaussians there are labelled); where another label renders, 0.
 //! - Part decay (δ, once per label per keyframe, floored at 0): every rendered part of a Whole
 //!   match (either outcome) and every Partial target that lost at least one part to a fresh
 //!   label.

@@ -117,7 +117,8 @@ fn whole_input_wins_merges_parts_into_largest() {
 
 #[test]
 fn whole_input_loses_takes_rendered_parts() {
-    // C_s = 0.4 < C̄r = 0.433: pixels take the rendered parts, the rest → 0; parts decay.
+    // C_s = 0.4 < C̄r = 0.433: pixels take the rendered parts, unmapped rows the largest part
+    // (1); parts decay.
     let scene = whole_scene(0.4);
     let mut consensus = consensus_with(&[0.4, 0.5], config());
     let out = scene.run(&mut consensus);
@@ -128,7 +129,7 @@ fn whole_input_loses_takes_rendered_parts() {
     assert!(out.relabels.is_empty());
     assert_eq!(&out.consistent_label_map[..200], &[1; 200][..]);
     assert_eq!(&out.consistent_label_map[200..300], &[2; 100][..]);
-    assert_eq!(&out.consistent_label_map[300..], &[0; 100][..]);
+    assert_eq!(&out.consistent_label_map[300..], &[1; 100][..]);
     assert_relative_eq!(conf(&consensus, 1), 0.34);
     assert_relative_eq!(conf(&consensus, 2), 0.44);
 }

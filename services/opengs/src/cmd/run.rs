@@ -3,9 +3,10 @@
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
+use opengs_pipeline::consensus_stage::Ablation;
 use opengs_pipeline::{DatasetArgs, DeployFile, RunOptions, RunSummary, Supervisor};
 
-#[derive(clap::Args)]
+#[derive(clap::Args, Clone)]
 pub struct RunArgs {
     #[command(flatten)]
     pub dataset: DatasetArgs,
@@ -21,6 +22,9 @@ pub struct RunArgs {
     /// Segmenter to start with: classic (no weights), prior (ground truth), sam, mobilesamv2.
     #[arg(long)]
     pub segmenter: Option<String>,
+    /// Switch a consensus module off (repeatable), as in the paper's ablation table.
+    #[arg(long, value_enum)]
+    pub ablation: Vec<Ablation>,
     /// Start tracking at the ground-truth first pose instead of the identity.
     #[arg(long)]
     pub gt_first_pose: bool,
@@ -36,6 +40,13 @@ pub struct RunArgs {
 }
 
 pub fn run(args: RunArgs) -> anyhow::Result<()> {
+    let summary = execute(&args)?;
+    print_summary(&summary);
+    Ok(())
+}
+
+/// Starts the pipeline as `args` say and waits for it to finish.
+pub fn execute(args: &RunArgs) -> anyhow::Result<RunSummary> {
     let mut deploy = DeployFile::load(&args.deploy)?;
     if let Some(kind) = &args.segmenter {
         let stage = deploy
@@ -66,6 +77,20 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
     if args.gt_first_pose {
         stage_args.insert("tracker".to_string(), vec!["--gt-first-pose".to_string()]);
     }
+    if !args.ablation.is_empty() {
+        if !deploy.stages.iter().any(|s| s.name == "consensus") {
+            anyhow::bail!(
+                "--ablation: deploy file {} has no consensus stage",
+                args.deploy.display()
+            );
+        }
+        let flags = args
+            .ablation
+            .iter()
+            .flat_map(|a| ["--ablation".to_string(), a.as_str().to_string()])
+            .collect();
+        stage_args.insert("consensus".to_string(), flags);
+    }
     eprintln!(
         "opengs run {run_id}: dataset {}, deploy {} ({}), output {}",
         args.dataset.dataset,
@@ -73,7 +98,7 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
         deploy.description,
         out_dir.display()
     );
-    let summary = Supervisor::run(RunOptions {
+    Supervisor::run(RunOptions {
         deploy,
         dataset: args.dataset.clone(),
         out_dir: out_dir.clone(),
@@ -82,9 +107,7 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
         stage_args,
         progress: !args.quiet,
         quality_every: args.quality_every,
-    })?;
-    print_summary(&summary);
-    Ok(())
+    })
 }
 
 fn print_summary(s: &RunSummary) {
@@ -121,6 +144,21 @@ fn print_summary(s: &RunSummary) {
             "render quality: PSNR {:.2} dB, SSIM {:.3} over {} frames (valid depth only)",
             q.psnr_db, q.ssim, q.frames_evaluated
         );
+    }
+    if let Some(sem) = &s.semantics {
+        if let Some(m) = &sem.map {
+            print!(
+                "labels: mIoU {:.2}, acc {:.2} over {} held-out frames",
+                m.miou, m.acc, m.frames
+            );
+            if let Some(r) = &sem.raw {
+                print!(
+                    " (segmenter alone: mIoU {:.2}, acc {:.2} over {} keyframes)",
+                    r.miou, r.acc, r.frames
+                );
+            }
+            println!("; {} global labels, {} in the map", sem.labels, sem.map_labels);
+        }
     }
     println!("\nper-stage latency:\n{}", s.latency.table());
     if !s.leftover_files.is_empty() {

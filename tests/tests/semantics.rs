@@ -1,0 +1,106 @@
+//! End-to-end semantic loop: segmenter → consensus ↔ mapper on the synthetic room, scored with
+//! one global label ↔ instance matching on label maps rendered at held-out poses.
+
+use std::path::Path;
+use std::process::Command;
+
+use opengs_e2e::{binary, serial};
+
+/// Frames of the synthetic loop used by these runs, and the sensor rate: slow enough that the
+/// mapper and consensus see most keyframes on a loaded 2-core machine.
+const FRAMES: &str = "300";
+const RATE: &str = "10";
+
+fn run(segmenter: &str, out: &Path, extra: &[&str]) -> (serde_json::Value, serde_json::Value) {
+    let output = Command::new(binary("opengs"))
+        .args([
+            "run",
+            "--quiet",
+            "--segmenter",
+            segmenter,
+            "--frames",
+            FRAMES,
+            "--max-rate",
+            RATE,
+            "--quality-every",
+            "15",
+        ])
+        .args(extra)
+        .arg("--out")
+        .arg(out)
+        .args([
+            "--run-id",
+            &format!("t{}-sem-{segmenter}", std::process::id()),
+        ])
+        .output()
+        .expect("opengs run");
+    let stdout = String::from_utf8_lossy(&output.stdout);
+    assert!(
+        output.status.success(),
+        "{stdout}\n{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    assert!(stdout.contains("mIoU"), "{stdout}");
+    let read = |name: &str| -> serde_json::Value {
+        serde_json::from_str(&std::fs::read_to_string(out.join(name)).expect(name)).expect(name)
+    };
+    (read("metrics.json"), read("semantics.json"))
+}
+
+#[test]
+fn prior_segments_give_one_label_per_object() {
+    let _serial = serial();
+    let dir = tempfile::tempdir().expect("tmp");
+    let out = dir.path().join("run");
+    let (metrics, semantics) = run("prior", &out, &[]);
+    let miou = metrics["miou"].as_f64().expect("miou");
+    let raw = metrics["miou_raw"].as_f64().expect("miou_raw");
+    assert!(miou >= 90.0, "mIoU {miou}\n{semantics:#}");
+    // Ground truth scored against itself.
+    assert!((raw - 100.0).abs() < 1e-9, "raw {raw}");
+    // Every object that is more than a sliver of the views carries one dominant label.
+    let instances = semantics["map"]["instances"].as_array().expect("instances");
+    let total: f64 = instances
+        .iter()
+        .map(|i| i["pixels"].as_f64().unwrap_or(0.0))
+        .sum();
+    for i in instances {
+        let pixels = i["pixels"].as_f64().unwrap_or(0.0);
+        if pixels < 0.002 * total {
+            continue;
+        }
+        let share = i["dominant_share"].as_f64().unwrap_or(0.0);
+        assert!(
+            share >= 0.8 && i["dominant_label"].as_u64() == i["label"].as_u64(),
+            "instance {i}"
+        );
+    }
+    // labels.json: the global table with classes from the dataset and Gaussian counts.
+    let labels: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("labels.json")).expect("labels"))
+            .expect("json");
+    let labels = labels.as_array().expect("array");
+    assert!(labels.iter().any(|l| l["class"] == "table"), "{labels:?}");
+    assert!(labels
+        .iter()
+        .any(|l| l["gaussians"].as_u64().unwrap_or(0) > 1000));
+    // Label PNGs beside the renders, the segmenter's maps under segments/.
+    let renders: Vec<_> = std::fs::read_dir(out.join("renders"))
+        .expect("renders")
+        .filter_map(|e| e.ok())
+        .filter(|e| e.file_name().to_string_lossy().starts_with("labels_"))
+        .collect();
+    assert!(!renders.is_empty());
+    assert!(std::fs::read_dir(out.join("segments")).expect("segments").count() > 5);
+}
+
+#[test]
+fn classic_map_labels_beat_the_raw_segmenter() {
+    let _serial = serial();
+    let dir = tempfile::tempdir().expect("tmp");
+    let (metrics, semantics) = run("classic", &dir.path().join("run"), &[]);
+    let miou = metrics["miou"].as_f64().expect("miou");
+    let raw = metrics["miou_raw"].as_f64().expect("miou_raw");
+    // Classic relabels arbitrarily per frame: the global matching punishes it, the map not.
+    assert!(miou > raw + 10.0, "map {miou} vs raw {raw}\n{semantics:#}");
+}
