@@ -2,8 +2,9 @@
 //! consensus, and the consensus result applied to the map (METHOD §3–§5).
 //!
 //! Decisions where METHOD.md is open:
-//! - Unlabelled (label 0) Gaussians whose centre projects onto a pixel of the consistent
-//!   input label map, within the rendered surface depth there, take that pixel's label. For
+//! - Unlabelled (label 0) Gaussians whose centre projects onto a labelled pixel of the
+//!   consistent input label map, and that are visible there (weight α·T ≥ 0.05 in the pixel's
+//!   top-K, or within 5 cm + 5 % of the rendered surface depth), take that pixel's label. For
 //!   the Gaussians added at this keyframe that is the pixel they were back-projected from;
 //!   the rule also labels Gaussians of keyframes the (slow) segmenter skipped.
 //! - Order: relabels via G_topK, then counter-pruning selection (so a Gaussian just moved to
@@ -22,11 +23,15 @@ use crate::pixel_top_k::PixelTopK;
 
 /// Renders kept at most while their consensus is outstanding (the segmenter works on the
 /// newest keyframe only, so more would be stale).
-pub const MAX_PENDING_RENDERS: usize = 4;
+pub const MAX_PENDING_RENDERS: usize = 3;
 
 /// Below this accumulated α a pixel has no surface depth. Low on purpose: fresh Gaussians have
 /// opacity 0.1, and D/S is a depth whatever S is.
 const MIN_SILHOUETTE: f32 = 0.01;
+
+/// A Gaussian with at least this weight at its centre pixel is seen there (fresh Gaussians
+/// have opacity 0.1; one mostly hidden behind a surface stays below).
+const MIN_LABEL_WEIGHT: f32 = 0.05;
 
 /// Visible and total Gaussians of one label in a keyframe render (completeness, §5.2).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -236,8 +241,15 @@ impl Mapper {
                 continue;
             }
             let p = v as usize * k.width as usize + u as usize;
+            if labels[p] == 0 {
+                continue;
+            }
+            // Visible at its centre: a real share of the pixel's weight, or on the rendered
+            // surface (D/S blends depths, so it only catches what the top-K lacks).
             let surface = render.surface_depth[p];
-            if labels[p] != 0 && surface > 0.0 && (z - surface).abs() <= 0.03 + 0.02 * surface {
+            let on_surface = surface > 0.0 && (z - surface).abs() <= 0.05 + 0.05 * surface;
+            let weight = render.top_k.weight_of(p, i as u32).unwrap_or(0.0);
+            if on_surface || weight >= MIN_LABEL_WEIGHT {
                 self.map.labels[i] = labels[p];
                 labelled += 1;
             }

@@ -13,7 +13,7 @@ fn gaussian(x: f32, y: f32, z: f32, scale: f32, label: u32) -> Gaussian {
         [x, y, z],
         [1.0, 0.0, 0.0, 0.0],
         [scale; 3],
-        0.95,
+        0.99,
         [0.5; 3],
         label,
     )
