@@ -91,7 +91,12 @@ fn prior_segments_give_one_label_per_object() {
         .filter(|e| e.file_name().to_string_lossy().starts_with("labels_"))
         .collect();
     assert!(!renders.is_empty());
-    assert!(std::fs::read_dir(out.join("segments")).expect("segments").count() > 5);
+    assert!(
+        std::fs::read_dir(out.join("segments"))
+            .expect("segments")
+            .count()
+            > 5
+    );
 }
 
 #[test]

@@ -15,9 +15,10 @@ pub fn write_label_png(path: &Path, width: u32, height: u32, labels: &[u32]) -> 
     }
     let mut raw = Vec::with_capacity(labels.len());
     for &l in labels {
-        raw.push(u16::try_from(l).map_err(|_| {
-            format!("{}: label {l} does not fit a 16-bit PNG", path.display())
-        })?);
+        raw.push(
+            u16::try_from(l)
+                .map_err(|_| format!("{}: label {l} does not fit a 16-bit PNG", path.display()))?,
+        );
     }
     let img: ImageBuffer<Luma<u16>, Vec<u16>> =
         ImageBuffer::from_raw(width, height, raw).ok_or("image buffer size")?;
@@ -57,7 +58,9 @@ mod tests {
             read_label_png(&path).unwrap(),
             (3, 2, vec![0, 1, 65535, 7, 7, 300])
         );
-        assert!(write_label_png(&path, 1, 1, &[70000]).unwrap_err().contains("70000"));
+        assert!(write_label_png(&path, 1, 1, &[70000])
+            .unwrap_err()
+            .contains("70000"));
         assert!(write_label_png(&path, 2, 2, &[1]).is_err());
         std::fs::write(&path, b"not a png").unwrap();
         assert!(read_label_png(&path).unwrap_err().contains("l.png"));

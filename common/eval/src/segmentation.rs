@@ -113,12 +113,7 @@ impl LabelConfusion {
             return None;
         }
         let instances: Vec<u32> = self.truth.keys().copied().collect();
-        let mut labels: Vec<u32> = self
-            .predicted
-            .keys()
-            .copied()
-            .filter(|&p| p != 0)
-            .collect();
+        let mut labels: Vec<u32> = self.predicted.keys().copied().filter(|&p| p != 0).collect();
         labels.sort_unstable();
         // kuhn_munkres needs rows ≤ columns: pad with "no label" columns.
         let columns = labels.len().max(instances.len());

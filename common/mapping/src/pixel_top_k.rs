@@ -118,7 +118,10 @@ mod tests {
         let mut t = PixelTopK::from_lists(
             2,
             1,
-            &[vec![(0, 0.5), (2, 0.25), (3, 0.1)], vec![(1, 0.5), (3, 0.2)]],
+            &[
+                vec![(0, 0.5), (2, 0.25), (3, 0.1)],
+                vec![(1, 0.5), (3, 0.2)],
+            ],
         );
         // Gaussians 0 and 3 removed: 1 → 0, 2 → 1.
         t.remap(&[None, Some(0), Some(1), None]);

@@ -83,7 +83,11 @@ pub enum ConsensusApplyError {
     #[error("no render of keyframe #{0} is pending (restarted mapper, or it was superseded)")]
     NoRender(u64),
     #[error("consistent label map of keyframe #{seq} has {got} pixels, the render {expected}")]
-    SizeMismatch { seq: u64, expected: usize, got: usize },
+    SizeMismatch {
+        seq: u64,
+        expected: usize,
+        got: usize,
+    },
     #[error("consensus of keyframe #{seq}: {source}")]
     Invalid {
         seq: u64,
@@ -190,8 +194,8 @@ impl Mapper {
             update.counter_regions,
         )
         .map_err(invalid)?;
-        let relabelled =
-            apply_relabels(&render.top_k, &mut self.map.labels, update.relabels).map_err(invalid)?;
+        let relabelled = apply_relabels(&render.top_k, &mut self.map.labels, update.relabels)
+            .map_err(invalid)?;
         let map = &self.map;
         let counters = select_counter_gaussians(
             &render.top_k,

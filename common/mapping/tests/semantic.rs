@@ -67,7 +67,11 @@ fn render_reports_labels_visibility_and_top_k() {
     // Two Gaussians carry label 5 and both are visible.
     assert_eq!(r.visibility.len(), 1);
     assert_eq!(
-        (r.visibility[0].label, r.visibility[0].visible, r.visibility[0].total),
+        (
+            r.visibility[0].label,
+            r.visibility[0].visible,
+            r.visibility[0].total
+        ),
         (5, 2, 2)
     );
     assert!((r.surface_depth[px(42, 42) as usize] - 2.0).abs() < 1e-3);

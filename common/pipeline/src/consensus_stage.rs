@@ -9,8 +9,8 @@ use std::path::{Path, PathBuf};
 use opengs_datasets::DatasetKind;
 use opengs_ipc_schema::service::{CONSENSUS, RENDERS, SEGMENTS};
 use opengs_ipc_schema::{
-    now_ns, ConsensusHeader, ConsensusResult, MessageKind, PixelRun, RenderHeader,
-    SegmentsHeader, Stamp,
+    now_ns, ConsensusHeader, ConsensusResult, MessageKind, PixelRun, RenderHeader, SegmentsHeader,
+    Stamp,
 };
 use opengs_runtime::{
     waitset, CallbackProgression, Inlet, Outlet, RunContext, TelemetrySink, WaitSetRunResult,
@@ -331,7 +331,12 @@ struct SavedTable {
 fn save_table(out_dir: &Path, table: &GlobalLabelTable) -> anyhow::Result<()> {
     let path = out_dir.join(LABEL_TABLE);
     let tmp = path.with_extension("json.tmp");
-    std::fs::write(&tmp, serde_json::to_vec_pretty(&SavedTable { table: table.clone() })?)?;
+    std::fs::write(
+        &tmp,
+        serde_json::to_vec_pretty(&SavedTable {
+            table: table.clone(),
+        })?,
+    )?;
     std::fs::rename(&tmp, &path)?;
     Ok(())
 }
@@ -343,8 +348,8 @@ pub fn load_label_table(run_dir: &Path) -> anyhow::Result<Option<GlobalLabelTabl
         return Ok(None);
     }
     let text = std::fs::read_to_string(&path)?;
-    let saved: SavedTable = serde_json::from_str(&text)
-        .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+    let saved: SavedTable =
+        serde_json::from_str(&text).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
     Ok(Some(saved.table))
 }
 
@@ -408,9 +413,6 @@ pub fn run_consensus(ctx: &RunContext, out_dir: &Path, args: &ConsensusArgs) -> 
         stage.run_joined()?;
     }
     save_table(out_dir, stage.consensus.table())?;
-    tracing::info!(
-        "consensus: {} global labels",
-        stage.consensus.table().len()
-    );
+    tracing::info!("consensus: {} global labels", stage.consensus.table().len());
     Ok(())
 }

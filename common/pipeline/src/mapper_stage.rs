@@ -14,10 +14,10 @@ use opengs_ipc_schema::{
     MessageKind, RenderHeader, SegmentsHeader, Stamp,
 };
 use opengs_mapping::{ConsensusUpdate, DensifyInput, Mapper, MapperConfig, StoredKeyframe};
-use opengs_semantics::{CounterPruneRegion, RelabelInstruction};
 use opengs_runtime::{
     waitset, CallbackProgression, Inlet, Outlet, RunContext, TelemetrySink, WaitSetRunResult,
 };
+use opengs_semantics::{CounterPruneRegion, RelabelInstruction};
 use opengs_splat::{read_ply_file, write_ply_file, Camera, GaussianMap};
 
 /// Options of the mapper stage.
@@ -98,8 +98,10 @@ impl MapperStage {
             h.depth_scale,
             self.mapper.config(),
         );
-        self.cameras
-            .push_back((h.stamp.seq, Camera::from_pose(k, &pose, self.mapper.config().near)));
+        self.cameras.push_back((
+            h.stamp.seq,
+            Camera::from_pose(k, &pose, self.mapper.config().near),
+        ));
         while self.cameras.len() > KEPT_CAMERAS {
             self.cameras.pop_front();
         }
@@ -237,7 +239,10 @@ impl MapperStage {
             })
             .collect();
         // Prune runs carry θ (f32 bits); every run of one result carries the same.
-        let theta = res.prunes.first().map_or(f32::INFINITY, |r| f32::from_bits(r.to));
+        let theta = res
+            .prunes
+            .first()
+            .map_or(f32::INFINITY, |r| f32::from_bits(r.to));
         if !(theta.is_finite() && theta > 0.0) && !res.prunes.is_empty() {
             tracing::error!("consensus #{seq} rejected: counter-pruning scale {theta} is not > 0");
             self.telemetry.dropped(&h.stamp);

@@ -31,10 +31,16 @@ struct Row {
 
 pub fn run(args: AblationArgs) -> anyhow::Result<()> {
     if !args.run.ablation.is_empty() || args.run.out.is_some() {
-        anyhow::bail!("opengs ablation runs every setting itself: drop --ablation and --out (use --out-root)");
+        anyhow::bail!(
+            "opengs ablation runs every setting itself: drop --ablation and --out (use --out-root)"
+        );
     }
     let settings: Vec<(String, Vec<Ablation>)> = std::iter::once(("full".to_string(), vec![]))
-        .chain(Ablation::ALL.iter().map(|a| (a.as_str().to_string(), vec![*a])))
+        .chain(
+            Ablation::ALL
+                .iter()
+                .map(|a| (a.as_str().to_string(), vec![*a])),
+        )
         .collect();
     std::fs::create_dir_all(&args.out_root)?;
     let mut rows = Vec::new();

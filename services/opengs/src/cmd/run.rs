@@ -157,7 +157,10 @@ fn print_summary(s: &RunSummary) {
                     r.miou, r.acc, r.frames
                 );
             }
-            println!("; {} global labels, {} in the map", sem.labels, sem.map_labels);
+            println!(
+                "; {} global labels, {} in the map",
+                sem.labels, sem.map_labels
+            );
         }
     }
     println!("\nper-stage latency:\n{}", s.latency.table());
