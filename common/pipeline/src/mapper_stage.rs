@@ -243,7 +243,8 @@ impl MapperStage {
             .prunes
             .first()
             .map_or(f32::INFINITY, |r| f32::from_bits(r.to));
-        if !(theta.is_finite() && theta > 0.0) && !res.prunes.is_empty() {
+        let theta_ok = res.prunes.is_empty() || (theta.is_finite() && theta > 0.0);
+        if !theta_ok {
             tracing::error!("consensus #{seq} rejected: counter-pruning scale {theta} is not > 0");
             self.telemetry.dropped(&h.stamp);
             return;
