@@ -11,7 +11,8 @@ use crate::{MessageKind, SchemaError, Stamp};
 pub const MAX_CONSENSUS_ENTRIES: u32 = 1 << 20;
 
 /// A label change over a set of pixels: `from` → `to` for pixels
-/// `pixels[offset .. offset + count]` (for prune runs `to` is unused, 0).
+/// `pixels[offset .. offset + count]`. For prune runs `from` is the label ℓr whose counter
+/// Gaussians are looked for there, and `to` carries θ (metres, `f32::to_bits`).
 #[derive(Debug, Clone, Copy, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
 #[repr(C)]
 pub struct PixelRun {
