@@ -109,3 +109,70 @@ fn classic_map_labels_beat_the_raw_segmenter() {
     // Classic relabels arbitrarily per frame: the global matching punishes it, the map not.
     assert!(miou > raw + 10.0, "map {miou} vs raw {raw}\n{semantics:#}");
 }
+
+#[test]
+fn killed_consensus_resumes_its_label_table() {
+    let _serial = serial();
+    let dir = tempfile::tempdir().expect("tmp");
+    let out = dir.path().join("run");
+    let run_id = format!("t{}-sem-kill", std::process::id());
+    let run = std::process::Command::new(binary("opengs"))
+        .args([
+            "run",
+            "--quiet",
+            "--segmenter",
+            "prior",
+            "--frames",
+            FRAMES,
+            "--max-rate",
+            RATE,
+            "--quality-every",
+            "15",
+            "--run-id",
+            &run_id,
+        ])
+        .arg("--out")
+        .arg(&out)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("run starts");
+    // Once the consensus has saved its table, SIGKILL it.
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(120);
+    while !out.join("label_table.json").exists() {
+        assert!(
+            std::time::Instant::now() < deadline,
+            "no label table written"
+        );
+        std::thread::sleep(std::time::Duration::from_millis(100));
+    }
+    let pid = loop {
+        assert!(std::time::Instant::now() < deadline, "no consensus pid");
+        if let Some(p) = opengs_e2e::stage_pid(&run_id, "consensus") {
+            break p;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(100));
+    };
+    // SAFETY: signalling a process this test's run started.
+    assert_eq!(unsafe { libc::kill(pid, libc::SIGKILL) }, 0);
+    let output = run.wait_with_output().expect("run ends");
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(output.status.success(), "{stderr}");
+    assert!(stderr.contains("restarted consensus"), "{stderr}");
+    let log = std::fs::read_to_string(out.join("logs/consensus.log")).expect("log");
+    assert!(log.contains("resuming with"), "{log}");
+    let read = |name: &str| -> serde_json::Value {
+        serde_json::from_str(&std::fs::read_to_string(out.join(name)).expect(name)).expect(name)
+    };
+    let metrics = read("metrics.json");
+    let miou = metrics["miou"].as_f64().expect("miou");
+    assert!(miou >= 90.0, "mIoU {miou} after a consensus restart");
+    // Resumed, not restarted from an empty table: no label id was handed out twice, so the
+    // table has no more labels than the instances it saw plus a few.
+    let labels = read("labels.json");
+    let labels = labels.as_array().expect("array");
+    let instances = read("semantics.json")["map"]["instances"]
+        .as_array()
+        .map_or(0, |a| a.len());
+    assert!(labels.len() <= instances + 5, "{} labels", labels.len());
+}
