@@ -11,29 +11,36 @@ use opengs_e2e::{binary, serial};
 const FRAMES: &str = "300";
 const RATE: &str = "8";
 
-fn run(segmenter: &str, out: &Path, extra: &[&str]) -> (serde_json::Value, serde_json::Value) {
-    let output = Command::new(binary("opengs"))
-        .args([
-            "run",
-            "--quiet",
-            "--segmenter",
-            segmenter,
-            "--frames",
-            FRAMES,
-            "--max-rate",
-            RATE,
-            "--quality-every",
-            "15",
-        ])
-        .args(extra)
-        .arg("--out")
-        .arg(out)
-        .args([
-            "--run-id",
-            &format!("t{}-sem-{segmenter}", std::process::id()),
-        ])
-        .output()
-        .expect("opengs run");
+/// `opengs run` on the synthetic room with `segmenter`, into `out`.
+fn command(segmenter: &str, out: &Path, run_id: &str) -> Command {
+    let mut cmd = Command::new(binary("opengs"));
+    cmd.args([
+        "run",
+        "--quiet",
+        "--segmenter",
+        segmenter,
+        "--frames",
+        FRAMES,
+        "--max-rate",
+        RATE,
+        "--quality-every",
+        "15",
+        "--run-id",
+        run_id,
+    ])
+    .arg("--out")
+    .arg(out);
+    cmd
+}
+
+fn run(segmenter: &str, out: &Path) -> (serde_json::Value, serde_json::Value) {
+    let output = command(
+        segmenter,
+        out,
+        &format!("t{}-sem-{segmenter}", std::process::id()),
+    )
+    .output()
+    .expect("opengs run");
     let stdout = String::from_utf8_lossy(&output.stdout);
     assert!(
         output.status.success(),
@@ -52,7 +59,7 @@ fn prior_segments_give_one_label_per_object() {
     let _serial = serial();
     let dir = tempfile::tempdir().expect("tmp");
     let out = dir.path().join("run");
-    let (metrics, semantics) = run("prior", &out, &[]);
+    let (metrics, semantics) = run("prior", &out);
     let miou = metrics["miou"].as_f64().expect("miou");
     let raw = metrics["miou_raw"].as_f64().expect("miou_raw");
     assert!(miou >= 90.0, "mIoU {miou}\n{semantics:#}");
@@ -103,7 +110,7 @@ fn prior_segments_give_one_label_per_object() {
 fn classic_map_labels_beat_the_raw_segmenter() {
     let _serial = serial();
     let dir = tempfile::tempdir().expect("tmp");
-    let (metrics, semantics) = run("classic", &dir.path().join("run"), &[]);
+    let (metrics, semantics) = run("classic", &dir.path().join("run"));
     let miou = metrics["miou"].as_f64().expect("miou");
     let raw = metrics["miou_raw"].as_f64().expect("miou_raw");
     // Classic relabels arbitrarily per frame: the global matching punishes it, the map not.
@@ -116,23 +123,7 @@ fn killed_consensus_resumes_its_label_table() {
     let dir = tempfile::tempdir().expect("tmp");
     let out = dir.path().join("run");
     let run_id = format!("t{}-sem-kill", std::process::id());
-    let run = std::process::Command::new(binary("opengs"))
-        .args([
-            "run",
-            "--quiet",
-            "--segmenter",
-            "prior",
-            "--frames",
-            FRAMES,
-            "--max-rate",
-            RATE,
-            "--quality-every",
-            "15",
-            "--run-id",
-            &run_id,
-        ])
-        .arg("--out")
-        .arg(&out)
+    let run = command("prior", &out, &run_id)
         .stdout(std::process::Stdio::piped())
         .stderr(std::process::Stdio::piped())
         .spawn()
