@@ -5,8 +5,16 @@ use opengs_splat::{LossWeights, PruneConfig};
 pub struct MapperConfig {
     /// A keyframe point becomes a Gaussian only if no Gaussian is within this distance (m).
     pub overlap_distance: f32,
-    /// Opacity of new Gaussians (0.1).
+    /// Opacity of new Gaussians. METHOD §8 (after GS-ICP SLAM) says 0.1, a value made for
+    /// thousands of GPU iterations; the CPU mapper gets about two iterations per keyframe,
+    /// and a 0.1-opaque map renders translucent and dark until opacity is learned (synthetic
+    /// room, 600 frames, 2 steps per keyframe: end-of-run PSNR 21.0 dB at 0.1, 23.4 at 0.9
+    /// with `initial_scale` 0.7).
     pub initial_opacity: f32,
+    /// Largest axis of a new Gaussian as a fraction of the local sample spacing (3DGS: 1).
+    /// Below 1 the splats overlap less, so edges start sharper; with opaque splats the
+    /// surface stays closed down to about 0.5.
+    pub initial_scale: f32,
     /// Optimise at half resolution (keeps up on 2 cores).
     pub half_resolution: bool,
     /// Prune every this many iterations.
@@ -29,7 +37,8 @@ impl Default for MapperConfig {
     fn default() -> Self {
         Self {
             overlap_distance: 0.02,
-            initial_opacity: 0.1,
+            initial_opacity: 0.9,
+            initial_scale: 0.7,
             half_resolution: true,
             prune_every: 300,
             prune: PruneConfig::default(),

@@ -23,12 +23,13 @@ const MIN_AXIS: f64 = 0.1;
 
 /// New Gaussians for the keyframe points that have no map Gaussian within
 /// `overlap_distance` (METHOD §8): mean = point, shape = the point's covariance,
-/// size = local sample spacing, colour from the keyframe image.
+/// largest axis = `scale` × local sample spacing, colour from the keyframe image.
 pub fn gaussians_from_points(
     input: &DensifyInput,
     map_means: &[[f32; 3]],
     overlap_distance: f32,
     opacity: f32,
+    scale: f32,
 ) -> Vec<Gaussian> {
     let d2 = (overlap_distance as f64).powi(2);
     let existing: Vec<Point3<f64>> = map_means
@@ -84,11 +85,11 @@ pub fn gaussians_from_points(
         } else {
             0.01
         };
-        let (rotation, scale) = shape(&input.covariances[i], spacing);
+        let (rotation, axes) = shape(&input.covariances[i], spacing * scale as f64);
         out.push(Gaussian::from_values(
             [p.x as f32, p.y as f32, p.z as f32],
             rotation,
-            scale,
+            axes,
             opacity,
             color,
             0,
@@ -167,7 +168,7 @@ mod tests {
             intrinsics: k,
             rgb: &rgb,
         };
-        let all = gaussians_from_points(&input, &[], 0.02, 0.1);
+        let all = gaussians_from_points(&input, &[], 0.02, 0.1, 1.0);
         assert_eq!(all.len(), 2);
         assert!(
             (all[0].color()[0] - 60.0 / 255.0).abs() < 1e-5,
@@ -176,7 +177,7 @@ mod tests {
         assert!((all[0].opacity() - 0.1).abs() < 1e-6);
         // The first point already has a Gaussian 1 cm away: only the second is new.
         let near = [[points[0][0] + 0.01, points[0][1], 1.0]];
-        let new = gaussians_from_points(&input, &near, 0.02, 0.1);
+        let new = gaussians_from_points(&input, &near, 0.02, 0.1, 1.0);
         assert_eq!(new.len(), 1);
         assert!((new[0].mean[1] - points[1][1]).abs() < 1e-6);
     }

@@ -80,6 +80,7 @@ impl Mapper {
             &self.map.means,
             self.config.overlap_distance,
             self.config.initial_opacity,
+            self.config.initial_scale,
         );
         for g in &new {
             self.map.push(*g);
