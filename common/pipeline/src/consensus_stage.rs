@@ -112,8 +112,11 @@ struct OwnedRender {
     completeness: BTreeMap<u32, f32>,
 }
 
-/// Messages kept per side while their partner is missing.
-const MAX_WAITING: usize = 4;
+/// Segmentations kept while their render is missing: the mapper renders the newest one it
+/// has seen when it is free, which can be seconds behind the segmenter on a busy machine.
+const MAX_WAITING_SEGMENTS: usize = 24;
+/// Renders kept while their segmentation is missing (it normally comes first).
+const MAX_WAITING_RENDERS: usize = 4;
 
 struct ConsensusStage {
     consensus: LabelConsensus,
@@ -169,7 +172,7 @@ impl ConsensusStage {
                 tracing::warn!("segments #{}: {e}", h.stamp.seq);
             }
         }
-        insert_bounded(&mut self.segments, h.stamp.seq, seg);
+        insert_bounded(&mut self.segments, h.stamp.seq, seg, MAX_WAITING_SEGMENTS);
     }
 
     fn take_render(&mut self, h: &RenderHeader, payload: &[u8]) {
@@ -191,7 +194,7 @@ impl ConsensusStage {
             label_map: view.label_map.to_vec(),
             completeness,
         };
-        insert_bounded(&mut self.renders, h.stamp.seq, render);
+        insert_bounded(&mut self.renders, h.stamp.seq, render, MAX_WAITING_RENDERS);
     }
 
     /// Runs every keyframe that has both halves, oldest first; drops what is older.
@@ -256,9 +259,9 @@ impl ConsensusStage {
     }
 }
 
-fn insert_bounded<T>(map: &mut BTreeMap<u64, T>, seq: u64, value: T) {
+fn insert_bounded<T>(map: &mut BTreeMap<u64, T>, seq: u64, value: T, cap: usize) {
     map.insert(seq, value);
-    while map.len() > MAX_WAITING {
+    while map.len() > cap {
         map.pop_first();
     }
 }
