@@ -121,7 +121,6 @@ impl MapperStage {
             self.mapper.map().len(),
             self.mapper.keyframes()
         );
-        self.publish_target(&h.stamp)?;
         self.telemetry.processed(&h.stamp, start, now_ns());
         Ok(())
     }
@@ -351,8 +350,14 @@ pub fn run_mapper(ctx: &RunContext, out_dir: &Path, args: &MapperArgs) -> anyhow
         keyframes.clear_wakeups();
         segments.clear_wakeups();
         consensus.clear_wakeups();
+        // A backlog of keyframes is densified in one go and the tracker gets one target.
+        let mut newest = None;
         while let Some(sample) = keyframes.receive()? {
             stage.handle_keyframe(&pool, sample.user_header(), sample.payload())?;
+            newest = Some(sample.user_header().stamp);
+        }
+        if let Some(stamp) = newest {
+            stage.publish_target(&stamp)?;
         }
         while let Some(sample) = consensus.receive()? {
             stage.handle_consensus(sample.user_header(), sample.payload());
