@@ -8,6 +8,9 @@
 //! (tagger + open-vocabulary detector, [`ensemble`]) names the masks of any
 //! segmenter; [`model_check`] checks exported files against their role.
 
+/// True when built with the `onnx` cargo feature (the model runners exist).
+pub const ONNX: bool = cfg!(feature = "onnx");
+
 pub mod bench;
 pub mod class_match;
 pub mod classic;

@@ -31,6 +31,13 @@ fn parse_role(s: &str) -> Result<ModelRole, String> {
 
 pub fn run(args: ModelsArgs) -> anyhow::Result<()> {
     let ModelsWhat::Check { files, role } = args.what;
+    if !opengs_perception::ONNX {
+        anyhow::bail!(
+            "this opengs was built without ONNX Runtime support; rebuild with \
+             `cargo build --release --workspace --bins --features opengs-perception/onnx` \
+             and set ORT_DYLIB_PATH (scripts/setup-ort.sh)"
+        );
+    }
     let mut failed = 0usize;
     for file in &files {
         match check_model(file, role) {
