@@ -1,11 +1,12 @@
-//! TUM trajectory files: `timestamp tx ty tz qx qy qz qw`, camera-to-world.
+//! TUM trajectory files (`timestamp tx ty tz qx qy qz qw`, camera-to-world) as the dataset
+//! readers want them: sorted by time, errors as [`DatasetError`]. The parsing and formatting
+//! live in `opengs_eval::trajectory`, once.
 
-use std::io::Write;
 use std::path::Path;
 
-use opengs_geometry::{format_tum_pose, pose_from_tum, Pose};
+use opengs_eval::TrajectoryError;
+use opengs_geometry::{format_tum_pose, Pose};
 
-use crate::text::{data_lines, parse_numbers};
 use crate::DatasetError;
 
 /// A timestamped camera-to-world pose.
@@ -13,40 +14,20 @@ pub type StampedPose = (f64, Pose);
 
 /// Reads a TUM trajectory, sorted by time; errors name the file and line.
 pub fn read_tum_trajectory(path: &Path) -> Result<Vec<StampedPose>, DatasetError> {
-    let mut poses = Vec::new();
-    for (line_no, line) in data_lines(path)? {
-        let v = parse_numbers(path, line_no, &line)?;
-        if v.len() != 8 {
-            return Err(DatasetError::parse(
-                path,
-                line_no,
-                format!(
-                    "expected 8 numbers (timestamp tx ty tz qx qy qz qw), found {}",
-                    v.len()
-                ),
-            ));
-        }
-        let pose = pose_from_tum(&[v[1], v[2], v[3], v[4], v[5], v[6], v[7]])
-            .map_err(|e| DatasetError::parse(path, line_no, e.to_string()))?;
-        poses.push((v[0], pose));
-    }
+    let poses = opengs_eval::read_tum_trajectory(path).map_err(|e| match e {
+        TrajectoryError::Io { path, error } => DatasetError::io(&path, error),
+        TrajectoryError::Parse {
+            path,
+            line,
+            message,
+        } => DatasetError::parse(&path, line, message),
+    })?;
+    let mut poses: Vec<StampedPose> = poses.into_iter().map(|p| (p.timestamp, p.pose)).collect();
     poses.sort_by(|a, b| a.0.total_cmp(&b.0));
     Ok(poses)
 }
 
-/// Formats a pose line with enough digits to round-trip within 1e-9.
+/// One TUM line, the same formatting as `opengs_eval::format_tum_trajectory`.
 pub fn format_tum_line(timestamp: f64, pose: &Pose) -> String {
     format!("{timestamp:.6} {}", format_tum_pose(pose))
-}
-
-/// Writes a TUM trajectory file.
-pub fn write_tum_trajectory(path: &Path, poses: &[StampedPose]) -> Result<(), DatasetError> {
-    let mut text = String::from("# timestamp tx ty tz qx qy qz qw\n");
-    for (t, p) in poses {
-        text.push_str(&format_tum_line(*t, p));
-        text.push('\n');
-    }
-    let mut f = std::fs::File::create(path).map_err(|e| DatasetError::io(path, e))?;
-    f.write_all(text.as_bytes())
-        .map_err(|e| DatasetError::io(path, e))
 }
