@@ -7,6 +7,7 @@
 
 mod colormap;
 mod dataset_frames;
+mod densify;
 mod error;
 mod evaluate;
 mod frame_images;
@@ -25,6 +26,7 @@ mod tests;
 
 pub use colormap::{depth_color, error_color};
 pub use dataset_frames::{evaluate_dataset_quality, load_posed_frames};
+pub use densify::{split_largest_gradients, GradientStats};
 pub use error::QualityError;
 pub use evaluate::{
     evaluate_render_quality, png_positions, QualityEvaluator, DEFAULT_NEAR, MAX_PNGS,

@@ -1,5 +1,6 @@
 //! Offline refinement of a finished map: more Adam steps of the mapping loss (METHOD §8) on
-//! a run's keyframes in random order, with periodic pruning.
+//! a run's keyframes in random order, with periodic pruning and, in the first half,
+//! splitting of the Gaussians with the largest positional gradients ([`crate::densify`]).
 
 use std::time::Instant;
 
@@ -14,6 +15,7 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use serde::Serialize;
 
+use crate::densify::{split_largest_gradients, GradientStats};
 use crate::frame_images::{check_frame, target_frame};
 use crate::scene_extent::scene_extent;
 use crate::QualityError;
@@ -28,6 +30,13 @@ pub struct RefineConfig {
     pub seed: u64,
     /// Prune every this many iterations (and once at the end).
     pub prune_every: usize,
+    /// Split Gaussians every this many iterations during the first half (0: never).
+    pub densify_every: usize,
+    /// Fraction of the map split each time (those with the largest positional gradients).
+    pub densify_fraction: f32,
+    /// The position learning rate decays log-linearly to this fraction of its start over
+    /// the run (3DGS: 0.01 over 30k steps), so means settle instead of jittering.
+    pub final_mean_lr: f32,
     pub near: f32,
     pub loss: LossWeights,
     /// Smallest scene extent (m) used for the learning rate and size pruning, so a nearly
@@ -42,6 +51,9 @@ impl Default for RefineConfig {
             downscale: true,
             seed: 0,
             prune_every: 300,
+            densify_every: 250,
+            densify_fraction: 0.1,
+            final_mean_lr: 0.01,
             near: crate::DEFAULT_NEAR,
             loss: LossWeights::default(),
             min_scene_extent: 1.0,
@@ -58,6 +70,8 @@ pub struct RefineStats {
     pub gaussians_before: usize,
     pub gaussians_after: usize,
     pub pruned: usize,
+    /// Gaussians split in two by densification.
+    pub split: usize,
     /// Mean training loss over the first and the last tenth of the steps.
     pub first_loss: f32,
     pub last_loss: f32,
@@ -101,11 +115,15 @@ pub fn refine(
     };
     let gaussians_before = map.len();
     let mut adam = Adam::new(AdamConfig::gs_defaults(extent), map.len());
+    let mean_lr = adam.config.lr_mean;
     let mut ws = TrainWorkspace::new();
     let train = TrainConfig { loss: config.loss };
     let mut rng = ChaCha8Rng::seed_from_u64(config.seed);
     let mut order: Vec<usize> = Vec::new();
     let mut losses = Vec::with_capacity(config.iters);
+    let mut stats = GradientStats::default();
+    stats.reset(map.len());
+    let mut split = 0;
     for i in 0..config.iters {
         if order.is_empty() {
             // A fresh shuffled pass: every keyframe once per pass.
@@ -113,6 +131,8 @@ pub fn refine(
             order.shuffle(&mut rng);
         }
         let k = order.pop().unwrap_or(0);
+        let t = i as f32 / config.iters.max(2).saturating_sub(1) as f32;
+        adam.config.lr_mean = mean_lr * config.final_mean_lr.max(1e-6).powf(t);
         // Targets are built per step so only the compact RGB-D frames stay in memory.
         let full = target_frame(&keyframes[k].0);
         let target = if config.downscale {
@@ -122,8 +142,27 @@ pub fn refine(
         };
         let step = train_step(map, &mut adam, &cameras[k], &target, &train, &mut ws);
         losses.push(step.loss.total);
-        if config.prune_every > 0 && (i + 1) % config.prune_every == 0 {
+        stats.add(&ws.grads);
+        let densify =
+            config.densify_every > 0 && (i + 1) % config.densify_every == 0 && i < config.iters / 2;
+        if densify {
+            // Seen from at least a few keyframes, so one view's noise does not decide.
+            let min_views = (config.densify_every / keyframes.len().max(1)).clamp(1, 3) as u32;
+            split += split_largest_gradients(
+                map,
+                &mut adam,
+                &stats,
+                config.densify_fraction,
+                min_views,
+                &mut rng,
+            );
+        }
+        let pruning = config.prune_every > 0 && (i + 1) % config.prune_every == 0;
+        if pruning {
             prune(map, Some(&mut adam), &prune_config);
+        }
+        if densify || pruning {
+            stats.reset(map.len());
         }
         progress(i + 1, step.loss.total);
     }
@@ -142,7 +181,8 @@ pub fn refine(
         scene_extent: extent,
         gaussians_before,
         gaussians_after: map.len(),
-        pruned: gaussians_before.saturating_sub(map.len()),
+        pruned: (gaussians_before + split).saturating_sub(map.len()),
+        split,
         first_loss: mean(&losses[..tenth.min(losses.len())]),
         last_loss: mean(&losses[losses.len().saturating_sub(tenth)..]),
         seconds: t0.elapsed().as_secs_f64(),
