@@ -116,6 +116,8 @@ fn supervisor_restarts_a_killed_stage_and_the_run_finishes_clean() {
             &run_id,
             "--frames",
             &N.to_string(),
+            "--max-rate",
+            "30",
         ])
         .arg("--deploy")
         .arg(&deploy)
@@ -196,6 +198,7 @@ fn ctrl_c_stops_the_run_and_keeps_outputs() {
     let mut run = Guard(
         Command::new(binary("opengs"))
             .args(["run", "--quiet", "--run-id", &run_id, "--frames", "100000"])
+            .args(["--max-rate", "30"])
             .arg("--deploy")
             .arg(&deploy)
             .arg("--out")
@@ -280,6 +283,7 @@ fn edge_deploy_pins_and_nices_stages() {
             .args([
                 "run", "--quiet", "--deploy", "edge", "--run-id", &run_id, "--frames", "100000",
             ])
+            .args(["--max-rate", "30"])
             .arg("--out")
             .arg(&out)
             .stdout(Stdio::null())

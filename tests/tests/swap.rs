@@ -61,7 +61,16 @@ role = "source"
     let out = dir.path().join("run");
     let run_id = format!("t{}-swap", std::process::id());
     let run = Command::new(binary("opengs"))
-        .args(["run", "--quiet", "--frames", "360", "--run-id", &run_id])
+        .args([
+            "run",
+            "--quiet",
+            "--frames",
+            "360",
+            "--max-rate",
+            "30",
+            "--run-id",
+            &run_id,
+        ])
         .arg("--deploy")
         .arg(&deploy)
         .arg("--out")
