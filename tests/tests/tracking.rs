@@ -20,8 +20,6 @@ fn run(frames: usize, noise: bool) -> serde_json::Value {
         "--quiet",
         "--frames",
         &frames.to_string(),
-        "--max-rate",
-        "30",
         "--trajectory",
     ])
     .arg(fr1_xyz())
