@@ -159,8 +159,8 @@ fn killed_consensus_resumes_its_label_table() {
     let miou = metrics["miou"].as_f64().expect("miou");
     // Keyframes segmented while it was down are lost, so a little below the uninterrupted run.
     assert!(miou >= 80.0, "mIoU {miou} after a consensus restart");
-    // Resumed, not restarted from an empty table: no label id was handed out twice, so the
-    // table has no more labels than the instances it saw plus a few.
+    // The restart did not set off a burst of fresh labels for objects the map already knows
+    // (the log line above shows the table was resumed).
     let labels = read("labels.json");
     let labels = labels.as_array().expect("array");
     let instances = read("semantics.json")["map"]["instances"]

@@ -14,7 +14,8 @@
 use std::collections::{BTreeMap, VecDeque};
 
 use opengs_semantics::{
-    apply_relabels, select_counter_gaussians, CounterPruneRegion, RelabelInstruction,
+    apply_relabels, select_counter_gaussians, validate_regions, CounterPruneRegion,
+    RelabelInstruction,
 };
 use opengs_splat::{render, Camera, RenderRequest};
 
@@ -186,12 +187,10 @@ impl Mapper {
         }
         let invalid = |source| ConsensusApplyError::Invalid { seq, source };
         // Check the counter regions before the relabels change anything.
-        select_counter_gaussians(
+        validate_regions(
             &render.top_k,
-            &self.map.labels,
-            |_| 0.0,
-            f32::INFINITY,
-            update.counter_regions,
+            self.map.len(),
+            update.counter_regions.iter().map(|r| r.pixels.as_slice()),
         )
         .map_err(invalid)?;
         let relabelled = apply_relabels(&render.top_k, &mut self.map.labels, update.relabels)

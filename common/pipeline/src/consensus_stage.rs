@@ -325,21 +325,10 @@ impl WireResult {
     }
 }
 
-/// Table and config as kept in `label_table.json`.
-#[derive(serde::Serialize, serde::Deserialize)]
-struct SavedTable {
-    table: GlobalLabelTable,
-}
-
 fn save_table(out_dir: &Path, table: &GlobalLabelTable) -> anyhow::Result<()> {
     let path = out_dir.join(LABEL_TABLE);
     let tmp = path.with_extension("json.tmp");
-    std::fs::write(
-        &tmp,
-        serde_json::to_vec_pretty(&SavedTable {
-            table: table.clone(),
-        })?,
-    )?;
+    std::fs::write(&tmp, serde_json::to_vec_pretty(table)?)?;
     std::fs::rename(&tmp, &path)?;
     Ok(())
 }
@@ -351,9 +340,9 @@ pub fn load_label_table(run_dir: &Path) -> anyhow::Result<Option<GlobalLabelTabl
         return Ok(None);
     }
     let text = std::fs::read_to_string(&path)?;
-    let saved: SavedTable =
+    let table =
         serde_json::from_str(&text).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
-    Ok(Some(saved.table))
+    Ok(Some(table))
 }
 
 /// Runs the consensus stage until a termination signal.

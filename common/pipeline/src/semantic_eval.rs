@@ -10,7 +10,7 @@ use std::path::Path;
 use image::{ImageBuffer, Rgb};
 use opengs_datasets::{RgbdFrame, RgbdSource};
 use opengs_eval::{read_label_png, read_tum_trajectory, LabelConfusion, SegmentationScore};
-use opengs_quality::{merge_metrics_json, read_map, FrameMatcher, DEFAULT_NEAR};
+use opengs_quality::{merge_metrics_json, png_positions, read_map, FrameMatcher, DEFAULT_NEAR};
 use opengs_splat::{label_color, render, Camera, GaussianMap, RenderRequest};
 use serde::Serialize;
 
@@ -119,9 +119,12 @@ fn score_map(
     let k = source.intrinsics();
     let mut matcher = FrameMatcher::new(source);
     let mut confusion = LabelConfusion::new();
-    let mut scored: Vec<(usize, Vec<u32>, Vec<u32>)> = Vec::new();
     let every_n = every_n.max(1);
-    for start in (every_n / 2..trajectory.len()).step_by(every_n) {
+    let starts: Vec<usize> = (every_n / 2..trajectory.len()).step_by(every_n).collect();
+    // Spread over the slots, chosen up front so no label map has to be kept for later.
+    let pngs = png_positions(starts.len(), LABEL_PNGS);
+    let renders = run_dir.join("renders");
+    for (slot, &start) in starts.iter().enumerate() {
         // Held-out poses only: the first non-keyframe at or after `start`.
         let mut found = None;
         for p in trajectory.iter().skip(start).take(every_n.div_ceil(2)) {
@@ -150,14 +153,11 @@ fn score_map(
         confusion
             .add_frame(&predicted, &truth)
             .map_err(|e| anyhow::anyhow!("frame {}: {e}", frame.index))?;
-        scored.push((frame.index, predicted, truth));
-    }
-    let renders = run_dir.join("renders");
-    let step = (scored.len() / LABEL_PNGS).max(1);
-    for (index, predicted, truth) in scored.iter().step_by(step).take(LABEL_PNGS) {
-        std::fs::create_dir_all(&renders)?;
-        let path = renders.join(format!("labels_{index:06}.png"));
-        write_label_pair_png(&path, k.width, k.height, predicted, truth)?;
+        if pngs.contains(&slot) {
+            std::fs::create_dir_all(&renders)?;
+            let path = renders.join(format!("labels_{:06}.png", frame.index));
+            write_label_pair_png(&path, k.width, k.height, &predicted, &truth)?;
+        }
     }
     Ok(confusion.score())
 }

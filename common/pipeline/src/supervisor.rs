@@ -4,7 +4,7 @@
 
 use std::collections::BTreeMap;
 use std::io::IsTerminal;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
 use opengs_ipc_schema::service::{CONTROL_REPLIES, CONTROL_REQUESTS, POSES, TELEMETRY};
@@ -136,61 +136,25 @@ impl Supervisor {
                 }
             }
         };
-        let quality = if opts.quality_every > 0
+        // Scores need the map, poses, and a dataset with ground truth to compare with.
+        let scorable = opts.quality_every > 0
             && opts.out_dir.join("map.ply").exists()
-            && !state.recorder.is_empty()
-        {
-            eprintln!(
-                "scoring rendered views against every {}th frame ...",
+            && !state.recorder.is_empty();
+        let quality = score_run(
+            &opts,
+            scorable,
+            &format!(
+                "rendered views against every {}th frame",
                 opts.quality_every
-            );
-            let scored = opts
-                .dataset
-                .spec()
-                .and_then(|spec| Ok(opengs_datasets::open_dataset(&spec)?))
-                .and_then(|mut source| {
-                    Ok(opengs_quality::evaluate_run_quality(
-                        &opts.out_dir,
-                        source.as_mut(),
-                        opts.quality_every,
-                    )?)
-                });
-            match scored {
-                Ok(q) => Some(q),
-                Err(e) => {
-                    eprintln!("render quality: {e:#}");
-                    None
-                }
-            }
-        } else {
-            None
-        };
-        let semantics = if opts.quality_every > 0
-            && opts.out_dir.join("map.ply").exists()
-            && !state.recorder.is_empty()
-        {
-            eprintln!("scoring labels (mIoU) ...");
-            let scored = opts
-                .dataset
-                .spec()
-                .and_then(|spec| Ok(opengs_datasets::open_dataset(&spec)?))
-                .and_then(|mut source| {
-                    crate::semantic_eval::evaluate_run_semantics(
-                        &opts.out_dir,
-                        source.as_mut(),
-                        opts.quality_every,
-                    )
-                });
-            match scored {
-                Ok(s) => Some(s),
-                Err(e) => {
-                    eprintln!("semantic scores: {e:#}");
-                    None
-                }
-            }
-        } else {
-            None
-        };
+            ),
+            |dir, source, every| Ok(opengs_quality::evaluate_run_quality(dir, source, every)?),
+        );
+        let semantics = score_run(
+            &opts,
+            scorable,
+            "labels (mIoU)",
+            crate::semantic_eval::evaluate_run_semantics,
+        );
         let latency = state.profile.report();
         let summary = RunSummary {
             out_dir: opts.out_dir.clone(),
@@ -220,6 +184,26 @@ impl Supervisor {
             _ => Ok(summary),
         }
     }
+}
+
+/// Runs one end-of-run scoring over the run's dataset; a failure is reported, not fatal
+/// (the run's outputs are already written).
+fn score_run<T>(
+    opts: &RunOptions,
+    scorable: bool,
+    what: &str,
+    score: impl FnOnce(&Path, &mut dyn opengs_datasets::RgbdSource, usize) -> anyhow::Result<T>,
+) -> Option<T> {
+    if !scorable {
+        return None;
+    }
+    eprintln!("scoring {what} ...");
+    let scored = opts
+        .dataset
+        .spec()
+        .and_then(|spec| Ok(opengs_datasets::open_dataset(&spec)?))
+        .and_then(|mut source| score(&opts.out_dir, source.as_mut(), opts.quality_every));
+    scored.map_err(|e| eprintln!("scoring {what}: {e:#}")).ok()
 }
 
 struct RunState {

@@ -72,4 +72,4 @@ pub use output::{
     ConsensusOutput, CounterPruneRegion, LabelAssignment, LabelTarget, RelabelInstruction,
 };
 pub use relation::{pair_relation, PairRelation, Relation};
-pub use top_k::{apply_relabels, TopK, TopKView};
+pub use top_k::{apply_relabels, validate_regions, TopK, TopKView};

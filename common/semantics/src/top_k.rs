@@ -56,8 +56,9 @@ impl<C: Copy + Into<usize>> TopK for TopKView<'_, C> {
     }
 }
 
-/// Checks every pixel of `regions` and every Gaussian id recorded there.
-pub(crate) fn validate_regions<'p>(
+/// Checks every pixel of `regions` and every Gaussian id recorded there (against a map of
+/// `gaussians`), so a caller can validate before it changes anything.
+pub fn validate_regions<'p>(
     top_k: &impl TopK,
     gaussians: usize,
     regions: impl Iterator<Item = &'p [u32]>,
