@@ -8,34 +8,23 @@
 //! Needs `--features onnx` and ORT_DYLIB_PATH; skipped with a message otherwise.
 #![cfg(feature = "onnx")]
 
-use std::path::PathBuf;
+mod support;
 
 use opengs_geometry::Intrinsics;
 use opengs_perception::ensemble::{Ensemble, Tagger};
 use opengs_perception::model_check::{check_model, ModelRole};
 use opengs_perception::sam::{AmgParams, BoxProposer, SamSegmenter};
 use opengs_perception::{
-    EnsembleModelPaths, PerceptionError, SamModelPaths, Segmentation, Segmenter, SegmenterInput,
-    SegmenterKind, SegmenterOptions,
+    EnsembleModelPaths, PerceptionError, Segmentation, Segmenter, SegmenterInput, SegmenterKind,
+    SegmenterOptions,
 };
+
+use support::{fixture, runtime_available, sam_fixtures};
 
 const W: u32 = 160;
 const H: u32 = 120;
 const RED: [u32; 4] = [20, 30, 60, 70];
 const GREEN: [u32; 4] = [100, 40, 140, 80];
-
-fn fixture(name: &str) -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("tests/fixtures")
-        .join(name)
-}
-
-fn sam_paths() -> SamModelPaths {
-    SamModelPaths {
-        encoder: fixture("tiny_sam_encoder.onnx"),
-        decoder: fixture("tiny_sam_decoder.onnx"),
-    }
-}
 
 fn ensemble_paths(with_tagger: bool) -> EnsembleModelPaths {
     EnsembleModelPaths {
@@ -44,17 +33,6 @@ fn ensemble_paths(with_tagger: bool) -> EnsembleModelPaths {
         detector: Some(fixture("tiny_detector.onnx")),
         text_embeddings: Some(fixture("tiny_tag_embeddings.npy")),
     }
-}
-
-fn runtime_available() -> bool {
-    let ok = std::env::var_os("ORT_DYLIB_PATH").is_some();
-    if !ok && std::env::var_os("OPENGS_REQUIRE_ORT").is_some() {
-        panic!("OPENGS_REQUIRE_ORT is set but ORT_DYLIB_PATH is not (run scripts/setup-ort.sh)");
-    }
-    if !ok {
-        eprintln!("skipped: ORT_DYLIB_PATH not set (see DEPS.md, onnxruntime 1.31.1)");
-    }
-    ok
 }
 
 fn inside(r: [u32; 4], x: u32, y: u32) -> bool {
@@ -188,7 +166,7 @@ fn sam_with_ensemble_names_the_red_mask_only() {
         min_mask_pixels: 50,
         ..AmgParams::default()
     };
-    let sam = SamSegmenter::new(SegmenterKind::Sam, &sam_paths(), params, 1).expect("sam");
+    let sam = SamSegmenter::new(SegmenterKind::Sam, &sam_fixtures(), params, 1).expect("sam");
     let ensemble = Ensemble::new(&ensemble_paths(true), 1).expect("ensemble");
     let mut seg = opengs_perception::ensemble::EnsembleSegmenter::new(Box::new(sam), ensemble);
     assert_eq!(seg.name(), "sam");
@@ -214,7 +192,7 @@ fn mobilesamv2_prompts_with_proposed_boxes() {
     );
     // Through the factory, as the segmenter stage builds it.
     let options = SegmenterOptions {
-        sam_models: Some(sam_paths()),
+        sam_models: Some(sam_fixtures()),
         proposals: Some(fixture("tiny_proposals.onnx")),
         ensemble: ensemble_paths(false),
         threads: 1,

@@ -5,31 +5,13 @@
 #![cfg(feature = "onnx")]
 
 use std::collections::HashMap;
-use std::path::PathBuf;
 
 use opengs_geometry::Intrinsics;
-use opengs_perception::sam::{AmgParams, SamModelPaths, SamSegmenter};
+use opengs_perception::sam::{AmgParams, SamSegmenter};
 use opengs_perception::{PerceptionError, Segmenter, SegmenterInput, SegmenterKind};
 
-fn fixtures() -> SamModelPaths {
-    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures");
-    SamModelPaths {
-        encoder: dir.join("tiny_sam_encoder.onnx"),
-        decoder: dir.join("tiny_sam_decoder.onnx"),
-    }
-}
-
-fn runtime_available() -> bool {
-    let ok = std::env::var_os("ORT_DYLIB_PATH").is_some();
-    // scripts/test.sh fetches the runtime and sets this: there these tests must run, not skip.
-    if !ok && std::env::var_os("OPENGS_REQUIRE_ORT").is_some() {
-        panic!("OPENGS_REQUIRE_ORT is set but ORT_DYLIB_PATH is not (run scripts/setup-ort.sh)");
-    }
-    if !ok {
-        eprintln!("skipped: ORT_DYLIB_PATH not set (see DEPS.md, onnxruntime 1.31.1)");
-    }
-    ok
-}
+mod support;
+use support::{runtime_available, sam_fixtures};
 
 /// 160×120 grey image with red, green and blue rectangles; instance ids 0..=3.
 fn test_image() -> (Vec<u8>, Vec<u16>, u32, u32) {
@@ -83,8 +65,8 @@ fn segments_coloured_rectangles_with_the_tiny_models() {
         min_mask_pixels: 50,
         ..AmgParams::default()
     };
-    let mut sam =
-        SamSegmenter::new(SegmenterKind::Sam, &fixtures(), params, 1).expect("load tiny models");
+    let mut sam = SamSegmenter::new(SegmenterKind::Sam, &sam_fixtures(), params, 1)
+        .expect("load tiny models");
     assert_eq!(sam.name(), "sam");
     let out = sam.segment(&input).expect("segment");
     println!("{:?}", out.labels);
@@ -135,13 +117,18 @@ fn bad_model_path_is_a_model_error() {
     if !runtime_available() {
         return;
     }
-    let mut paths = fixtures();
+    let mut paths = sam_fixtures();
     paths.decoder = paths.decoder.with_file_name("missing.onnx");
     let err =
         SamSegmenter::new(SegmenterKind::MobileSamV2, &paths, AmgParams::default(), 1).unwrap_err();
     assert!(matches!(err, PerceptionError::Model { .. }), "{err}");
-    let err = SamSegmenter::new(SegmenterKind::Classic, &fixtures(), AmgParams::default(), 1)
-        .unwrap_err();
+    let err = SamSegmenter::new(
+        SegmenterKind::Classic,
+        &sam_fixtures(),
+        AmgParams::default(),
+        1,
+    )
+    .unwrap_err();
     assert!(matches!(err, PerceptionError::InvalidInput(_)), "{err}");
 }
 
@@ -151,7 +138,7 @@ fn kind_factory_builds_model_runners_from_paths() {
         return;
     }
     let options = opengs_perception::SegmenterOptions {
-        sam_models: Some(fixtures()),
+        sam_models: Some(sam_fixtures()),
         threads: 1,
         ..Default::default()
     };
@@ -180,7 +167,8 @@ fn time_tiny_models_on_a_synthetic_frame() {
             points_per_side: side,
             ..AmgParams::default()
         };
-        let mut sam = SamSegmenter::new(SegmenterKind::Sam, &fixtures(), params, 2).expect("load");
+        let mut sam =
+            SamSegmenter::new(SegmenterKind::Sam, &sam_fixtures(), params, 2).expect("load");
         let start = std::time::Instant::now();
         let out = sam.segment(&input).expect("segment");
         println!(

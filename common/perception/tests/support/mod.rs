@@ -1,10 +1,41 @@
-//! Shared helpers: synthetic frames and segmentation-vs-ground-truth metrics.
+//! Shared helpers: synthetic frames, segmentation-vs-ground-truth metrics, and the tiny ONNX
+//! fixtures with the ONNX Runtime check.
 #![allow(dead_code)]
 
 use std::collections::HashMap;
+use std::path::PathBuf;
 
 use opengs_datasets::{open_dataset, DatasetSpec, DepthNoise, InstanceClass, RgbdFrame};
 use opengs_geometry::Intrinsics;
+use opengs_perception::SamModelPaths;
+
+/// A committed test fixture (`tests/fixtures/NAME`).
+pub fn fixture(name: &str) -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/fixtures")
+        .join(name)
+}
+
+/// The tiny SAM encoder and decoder.
+pub fn sam_fixtures() -> SamModelPaths {
+    SamModelPaths {
+        encoder: fixture("tiny_sam_encoder.onnx"),
+        decoder: fixture("tiny_sam_decoder.onnx"),
+    }
+}
+
+/// True when ONNX Runtime can be loaded. scripts/test.sh fetches it and sets
+/// OPENGS_REQUIRE_ORT: there the ONNX tests must run, not skip.
+pub fn runtime_available() -> bool {
+    let ok = std::env::var_os("ORT_DYLIB_PATH").is_some();
+    if !ok && std::env::var_os("OPENGS_REQUIRE_ORT").is_some() {
+        panic!("OPENGS_REQUIRE_ORT is set but ORT_DYLIB_PATH is not (run scripts/setup-ort.sh)");
+    }
+    if !ok {
+        eprintln!("skipped: ORT_DYLIB_PATH not set (see DEPS.md, onnxruntime 1.31.1)");
+    }
+    ok
+}
 
 /// Frames `indices` of the embedded synthetic room, with camera and classes.
 pub fn synthetic_frames(indices: &[usize]) -> (Vec<RgbdFrame>, Intrinsics, Vec<InstanceClass>) {
