@@ -93,6 +93,9 @@ impl ConsensusArgs {
     }
 }
 
+/// Where the segmenter's label maps are saved, one PNG per keyframe.
+const SEGMENTS_DIR: &str = "segments";
+
 /// File the table is kept in, beside the run's other outputs.
 pub const LABEL_TABLE: &str = "label_table.json";
 
@@ -161,14 +164,9 @@ impl ConsensusStage {
         if self.save_pngs {
             let path = self
                 .out_dir
-                .join("segments")
+                .join(SEGMENTS_DIR)
                 .join(format!("{:06}.png", h.stamp.seq));
-            let saved = std::fs::create_dir_all(path.parent().unwrap_or(Path::new(".")))
-                .map_err(|e| e.to_string())
-                .and_then(|_| {
-                    opengs_eval::write_label_png(&path, h.width, h.height, &seg.label_map)
-                });
-            if let Err(e) = saved {
+            if let Err(e) = opengs_eval::write_label_png(&path, h.width, h.height, &seg.label_map) {
                 tracing::warn!("segments #{}: {e}", h.stamp.seq);
             }
         }
@@ -368,6 +366,9 @@ pub fn run_consensus(ctx: &RunContext, out_dir: &Path, args: &ConsensusArgs) -> 
         None => LabelConsensus::new(config)?,
     };
     std::fs::create_dir_all(out_dir)?;
+    if !args.no_segment_pngs {
+        std::fs::create_dir_all(out_dir.join(SEGMENTS_DIR))?;
+    }
     let node = ctx.node("consensus")?;
     let segments = Inlet::<SegmentsHeader>::new(ctx, &node, &SEGMENTS)?;
     let renders = Inlet::<RenderHeader>::new(ctx, &node, &RENDERS)?;
