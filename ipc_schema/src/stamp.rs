@@ -3,7 +3,7 @@ use iceoryx2::prelude::ZeroCopySend;
 use crate::SchemaError;
 
 /// Bumped whenever any header layout or payload layout changes.
-pub const SCHEMA_VERSION: u32 = 1;
+pub const SCHEMA_VERSION: u32 = 2;
 
 /// Message kinds; the discriminant travels in [`Stamp::kind`].
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

@@ -17,6 +17,9 @@ pub enum TelemetryEvent {
     Dropped = 3,
     /// The stage has no more work (end of data).
     Finished = 4,
+    /// Long work after the end of data (the mapper's final optimisation): `work_done` of
+    /// `work_total` steps.
+    Progress = 5,
 }
 
 impl TelemetryEvent {
@@ -26,6 +29,7 @@ impl TelemetryEvent {
             2 => Self::Processed,
             3 => Self::Dropped,
             4 => Self::Finished,
+            5 => Self::Progress,
             _ => return None,
         })
     }
@@ -47,6 +51,9 @@ pub struct TelemetryHeader {
     pub input_sent_ns: u64,
     pub start_ns: u64,
     pub end_ns: u64,
+    /// Progress events only: steps done and planned (0 otherwise).
+    pub work_done: u32,
+    pub work_total: u32,
 }
 
 impl TelemetryHeader {
@@ -72,7 +79,25 @@ impl TelemetryHeader {
             input_sent_ns,
             start_ns,
             end_ns,
+            work_done: 0,
+            work_total: 0,
         }
+    }
+
+    /// A progress record: `done` of `total` steps of long work.
+    pub fn progress(stage: &str, done: u32, total: u32, now_ns: u64) -> Self {
+        let stamp = Stamp::new(MessageKind::Telemetry, 0, 0, now_ns);
+        let mut h = Self::new(
+            stage,
+            TelemetryEvent::Progress,
+            &stamp,
+            now_ns,
+            now_ns,
+            now_ns,
+        );
+        h.work_done = done;
+        h.work_total = total;
+        h
     }
 
     pub fn stage_name(&self) -> &str {
@@ -94,6 +119,9 @@ impl TelemetryHeader {
             && (self.end_ns < self.start_ns || self.start_ns < self.input_sent_ns)
         {
             return Err(SchemaError::Invalid("telemetry timestamps out of order"));
+        }
+        if ev == TelemetryEvent::Progress && self.work_done > self.work_total {
+            return Err(SchemaError::Invalid("progress past its total"));
         }
         Ok(ev)
     }

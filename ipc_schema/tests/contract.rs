@@ -412,6 +412,12 @@ fn telemetry_round_trip_and_rejects() {
     let mut bad = t;
     bad.stage = [0; 16];
     assert!(bad.decode(&[]).is_err());
+    let p = TelemetryHeader::progress("mapper", 120, 500, 1000);
+    assert_eq!(p.decode(&[]), Ok(TelemetryEvent::Progress));
+    assert_eq!((p.work_done, p.work_total), (120, 500));
+    let mut bad = p;
+    bad.work_done = 501;
+    assert!(bad.decode(&[]).is_err());
 }
 
 #[test]

@@ -3,7 +3,7 @@
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-use opengs_e2e::{binary, serial, stage_pid};
+use opengs_e2e::{binary, serial, stage_pid, Guard};
 
 #[test]
 fn killed_mapper_resumes_from_its_checkpoint() {
@@ -84,6 +84,135 @@ role = "source"
     assert!(
         metrics["ate_rmse_cm"].as_f64().expect("ate") < 1.0,
         "{metrics}"
+    );
+    assert_eq!(
+        opengs_runtime::leftover_files(&run_id),
+        Vec::<std::path::PathBuf>::new()
+    );
+}
+
+/// A mapper with a final optimisation, a tracker and the synthetic sensor.
+fn finishing_deploy(dir: &std::path::Path) -> std::path::PathBuf {
+    let deploy = dir.join("deploy.toml");
+    std::fs::write(
+        &deploy,
+        r#"description = "test: mapper with a final optimisation"
+terminal_stage = "tracker"
+drain_timeout_s = 10
+[[stages]]
+name = "mapper"
+binary = "opengs-mapper"
+finish_timeout_s = 300
+[[stages]]
+name = "tracker"
+binary = "opengs-tracker"
+[[stages]]
+name = "sensor"
+binary = "opengs-sensor"
+role = "source"
+"#,
+    )
+    .expect("deploy");
+    deploy
+}
+
+fn finishing_run(
+    deploy: &std::path::Path,
+    out: &std::path::Path,
+    run_id: &str,
+    steps: usize,
+) -> Command {
+    let mut cmd = Command::new(binary("opengs"));
+    cmd.args(["run", "--quiet", "--frames", "100", "--max-rate", "15"])
+        .args(["--finish-steps", &steps.to_string(), "--run-id", run_id])
+        .arg("--deploy")
+        .arg(deploy)
+        .arg("--out")
+        .arg(out)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped());
+    cmd
+}
+
+fn mapper_stats(out: &std::path::Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(out.join("mapper.json")).expect("mapper.json"))
+        .expect("json")
+}
+
+#[test]
+fn final_optimisation_runs_after_the_data_and_ctrl_c_keeps_its_map() {
+    let _serial = serial();
+    let dir = tempfile::tempdir().expect("tmp");
+    let deploy = finishing_deploy(dir.path());
+
+    // To the end: the mapper gets the finish signal, runs its steps, then the run ends.
+    let out = dir.path().join("full");
+    let run_id = format!("t{}-finish", std::process::id());
+    let output = finishing_run(&deploy, &out, &run_id, 30)
+        .output()
+        .expect("run");
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(output.status.success(), "{stderr}");
+    assert!(
+        stderr.contains("mapper finished its final work"),
+        "{stderr}"
+    );
+    let stats = mapper_stats(&out);
+    let fin = &stats["final_optimisation"];
+    assert_eq!(fin["iterations"], 30, "{stats}");
+    assert!(
+        fin["last_loss"].as_f64().expect("loss") < fin["first_loss"].as_f64().expect("loss"),
+        "{stats}"
+    );
+    assert_eq!(fin["gaussians_after"], stats["gaussians"], "{stats}");
+    let map = opengs_splat::read_ply_file(out.join("map.ply")).expect("map.ply");
+    assert_eq!(
+        map.len() as u64,
+        stats["gaussians"].as_u64().expect("count")
+    );
+
+    // Ctrl-C during a final optimisation far too long to finish: the map so far is written.
+    let out = dir.path().join("interrupted");
+    let run_id = format!("t{}-finish-int", std::process::id());
+    let mut run = Guard(
+        finishing_run(&deploy, &out, &run_id, 1_000_000)
+            .spawn()
+            .expect("run starts"),
+    );
+    let deadline = Instant::now() + Duration::from_secs(120);
+    let log = out.join("logs/mapper.log");
+    while !std::fs::read_to_string(&log)
+        .is_ok_and(|l| l.contains("end of data: final optimisation"))
+    {
+        assert!(
+            Instant::now() < deadline,
+            "final optimisation never started"
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    // SAFETY: signalling our own child.
+    unsafe { libc::kill(run.0.id() as i32, libc::SIGINT) };
+    let started = Instant::now();
+    let status = loop {
+        if let Some(s) = run.0.try_wait().expect("wait") {
+            break s;
+        }
+        assert!(
+            started.elapsed() < Duration::from_secs(30),
+            "run did not stop on SIGINT"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    };
+    assert!(status.success());
+    let stats = mapper_stats(&out);
+    let done = stats["final_optimisation"]["iterations"]
+        .as_u64()
+        .expect("iterations");
+    assert!(done > 0 && done < 1_000_000, "{stats}");
+    let map = opengs_splat::read_ply_file(out.join("map.ply")).expect("map.ply kept");
+    assert_eq!(
+        map.len() as u64,
+        stats["gaussians"].as_u64().expect("count")
     );
     assert_eq!(
         opengs_runtime::leftover_files(&run_id),

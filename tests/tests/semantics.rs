@@ -25,6 +25,9 @@ fn command(segmenter: &str, out: &Path, run_id: &str) -> Command {
         RATE,
         "--quality-every",
         "15",
+        // The final optimisation sharpens colour, not labels; it has its own test.
+        "--finish-steps",
+        "0",
         "--run-id",
         run_id,
     ])

@@ -64,6 +64,11 @@ impl Mapper {
         &self.map
     }
 
+    /// The map, for work after mapping ends (the final optimisation keeps its own optimiser).
+    pub fn into_map(self) -> GaussianMap {
+        self.map
+    }
+
     pub fn keyframes(&self) -> usize {
         self.keyframes.len()
     }

@@ -40,6 +40,11 @@ pub struct StageSpec {
     pub dataset: bool,
     /// For swappable stages: the implementation to run (`--kind KIND`), changed by `opengs ctl swap`.
     pub kind: Option<String>,
+    /// Seconds this stage may work on after the end of the data (the mapper's final
+    /// optimisation): it gets SIGUSR1, and the others are stopped once it exits or this
+    /// runs out. 0 = none; Ctrl-C always stops at once.
+    #[serde(default)]
+    pub finish_timeout_s: f64,
 }
 
 fn default_restart_limit() -> u32 {
@@ -123,6 +128,12 @@ impl DeployFile {
         }
         let mut names = std::collections::BTreeSet::new();
         for s in &self.stages {
+            if !(s.finish_timeout_s.is_finite() && s.finish_timeout_s >= 0.0) {
+                return Err(invalid(format!(
+                    "stage '{}': finish_timeout_s must be ≥ 0 seconds, got {}",
+                    s.name, s.finish_timeout_s
+                )));
+            }
             if s.name.is_empty()
                 || s.name.len() > 16
                 || !s

@@ -5,6 +5,7 @@
 pub mod consensus_stage;
 pub mod dataset_args;
 pub mod deploy;
+pub mod final_optimisation;
 pub mod logging;
 pub mod mapper_stage;
 pub mod metrics;

@@ -4,7 +4,9 @@
 
 use std::collections::VecDeque;
 use std::io::Write;
+use std::ops::ControlFlow;
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use opengs_geometry::{pose_from_tum, Intrinsics};
@@ -19,6 +21,10 @@ use opengs_runtime::{
 };
 use opengs_semantics::{CounterPruneRegion, RelabelInstruction};
 use opengs_splat::{read_ply_file, write_ply_file, Camera, GaussianMap};
+
+use crate::final_optimisation::{
+    finish_requested, finish_requested_flag, optimise_final, KeptKeyframes,
+};
 
 /// Options of the mapper stage.
 #[derive(clap::Args, Debug, Clone)]
@@ -35,6 +41,15 @@ pub struct MapperArgs {
     /// K of the per-pixel top-K kept from each render for the consensus (METHOD §3).
     #[arg(long, default_value_t = opengs_splat::DEFAULT_TOP_K)]
     pub top_k: usize,
+    /// Full-resolution optimisation steps (with splitting) run when the supervisor signals
+    /// the end of the data (SIGUSR1), before `map.ply` is written; 0 = none. SIGTERM during
+    /// them stops early and keeps the map as it is.
+    #[arg(long, default_value_t = 0)]
+    pub finish_steps: usize,
+    /// Full-resolution keyframes kept for those steps (about 1.5 MB each at 640×480); past
+    /// this every other one is dropped.
+    #[arg(long, default_value_t = 300)]
+    pub finish_keyframes: usize,
 }
 
 /// Full-resolution cameras of the newest keyframes, for renders the consensus asks for.
@@ -68,6 +83,8 @@ struct MapperStage {
     telemetry: TelemetrySink,
     map_version: u32,
     out_dir: PathBuf,
+    /// Full-resolution keyframes for the final optimisation (only when it is asked for).
+    kept: Option<KeptKeyframes>,
 }
 
 impl MapperStage {
@@ -106,6 +123,12 @@ impl MapperStage {
             self.cameras.pop_front();
         }
         self.record_keyframe(h.stamp.seq);
+        if let Some(kept) = self.kept.as_mut() {
+            let pushed = kept.push(h.stamp.seq, pose, k, view.rgb, view.depth, h.depth_scale);
+            if let Err(e) = pushed {
+                tracing::warn!("{e}");
+            }
+        }
         let input = DensifyInput {
             points: view.points,
             covariances: view.covariances,
@@ -292,6 +315,7 @@ pub fn run_mapper(ctx: &RunContext, out_dir: &Path, args: &MapperArgs) -> anyhow
         half_resolution: !args.full_resolution,
         ..MapperConfig::default()
     };
+    let near = config.near;
     let checkpoint = out_dir.join(CHECKPOINT);
     let mapper = if checkpoint.exists() {
         let map = read_ply_file(&checkpoint)?;
@@ -315,6 +339,7 @@ pub fn run_mapper(ctx: &RunContext, out_dir: &Path, args: &MapperArgs) -> anyhow
         telemetry: TelemetrySink::new(ctx, &node, "mapper")?,
         map_version: 0,
         out_dir: out_dir.to_path_buf(),
+        kept: (args.finish_steps > 0).then(|| KeptKeyframes::new(args.finish_keyframes)),
     };
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(args.threads.max(1))
@@ -332,9 +357,12 @@ pub fn run_mapper(ctx: &RunContext, out_dir: &Path, args: &MapperArgs) -> anyhow
     let _tick = ws
         .attach_interval(Duration::from_secs(3600))
         .map_err(|e| anyhow::anyhow!("WaitSet: {e:?}"))?;
+    let finish = finish_requested_flag(&ws)?;
     stage.telemetry.ready();
     let started = Instant::now();
     let mut last_checkpoint = Instant::now();
+    let mut finishing: Option<Instant> = None;
+    let mut ended_by_finish = false;
     loop {
         // Block only when there is nothing to optimise; otherwise just look for news.
         let timeout = if stage.mapper.keyframes() == 0 {
@@ -343,7 +371,9 @@ pub fn run_mapper(ctx: &RunContext, out_dir: &Path, args: &MapperArgs) -> anyhow
             Duration::ZERO
         };
         match ws.wait_and_process_once_with_timeout(|_| CallbackProgression::Continue, timeout) {
-            Ok(WaitSetRunResult::TerminationRequest | WaitSetRunResult::Interrupt) => break,
+            Ok(WaitSetRunResult::TerminationRequest) => break,
+            // The finish signal interrupts the wait too.
+            Ok(WaitSetRunResult::Interrupt) if !finish_requested(&finish) => break,
             Err(e) => anyhow::bail!("WaitSet: {e:?}"),
             Ok(_) => {}
         }
@@ -374,6 +404,17 @@ pub fn run_mapper(ctx: &RunContext, out_dir: &Path, args: &MapperArgs) -> anyhow
                 stage.handle_segments(&pool, &h)?;
             }
         }
+        if finish_requested(&finish) {
+            // The last segmented keyframe's consensus still counts; then mapping ends.
+            let semantic_done = stage.waiting_segments.is_none() && stage.outstanding.is_none();
+            let since = *finishing.get_or_insert_with(Instant::now);
+            if semantic_done || since.elapsed() > CONSENSUS_TIMEOUT {
+                ended_by_finish = true;
+                break;
+            }
+            std::thread::sleep(Duration::from_millis(5));
+            continue;
+        }
         let mapper = &mut stage.mapper;
         pool.install(|| mapper.step());
         if last_checkpoint.elapsed().as_secs_f64() >= args.checkpoint_every {
@@ -381,19 +422,99 @@ pub fn run_mapper(ctx: &RunContext, out_dir: &Path, args: &MapperArgs) -> anyhow
             last_checkpoint = Instant::now();
         }
     }
-    let seconds = started.elapsed().as_secs_f64();
-    let map = stage.mapper.map();
-    if !map.is_empty() {
-        write_map_atomically(map, &out_dir.join("map.ply"))?;
+    let mapping_seconds = started.elapsed().as_secs_f64();
+    let iterations = stage.mapper.iterations();
+    let keyframes = stage.mapper.keyframes();
+    if !stage.mapper.map().is_empty() {
+        // The online map is safe before the final optimisation starts.
         stage.checkpoint();
     }
+    let MapperStage {
+        mapper,
+        telemetry,
+        kept,
+        ..
+    } = stage;
+    let mut map = mapper.into_map();
+    let mut finish_stats = None;
+    if let (true, Some(kept)) = (ended_by_finish, kept) {
+        let steps = args.finish_steps;
+        tracing::info!(
+            "end of data: final optimisation, {steps} full-resolution steps on {} keyframes",
+            kept.len()
+        );
+        let stop = AtomicBool::new(false);
+        let (tx, rx) = std::sync::mpsc::channel::<(usize, f32)>();
+        finish_stats = std::thread::scope(|scope| {
+            // The optimisation runs on the pool; this thread keeps the IPC side (progress
+            // telemetry, termination requests), whose handles cannot leave it.
+            let (map, kept, pool, stop) = (&mut map, &kept, &pool, &stop);
+            let worker = scope.spawn(move || {
+                pool.install(|| {
+                    optimise_final(map, kept, steps, near, |done, loss| {
+                        // The receiver lives until the worker is joined.
+                        let _ = tx.send((done, loss));
+                        if stop.load(Ordering::Relaxed) {
+                            ControlFlow::Break(())
+                        } else {
+                            ControlFlow::Continue(())
+                        }
+                    })
+                })
+            });
+            let mut last_report = Instant::now();
+            let (mut logged_tenth, mut last_log) = (0, Instant::now());
+            while !worker.is_finished() {
+                let mut latest = None;
+                while let Ok(p) = rx.recv_timeout(Duration::from_millis(100)) {
+                    latest = Some(p);
+                    if last_report.elapsed() > Duration::from_millis(500) {
+                        break;
+                    }
+                }
+                if let Some((done, loss)) = latest {
+                    if last_report.elapsed() > Duration::from_millis(500) {
+                        telemetry.progress(done as u32, steps as u32);
+                        // Every tenth of the steps, and at least twice a minute.
+                        if done * 10 / steps > logged_tenth || last_log.elapsed().as_secs() >= 30 {
+                            logged_tenth = done * 10 / steps;
+                            last_log = Instant::now();
+                            tracing::info!(
+                                "final optimisation: step {done}/{steps}, loss {loss:.4}"
+                            );
+                        }
+                        last_report = Instant::now();
+                    }
+                }
+                // SIGTERM (Ctrl-C, or the supervisor's time limit) keeps what is done.
+                let waited = ws.wait_and_process_once_with_timeout(
+                    |_| CallbackProgression::Continue,
+                    Duration::ZERO,
+                );
+                if matches!(waited, Ok(WaitSetRunResult::TerminationRequest)) {
+                    stop.store(true, Ordering::Relaxed);
+                }
+            }
+            worker
+                .join()
+                .map_err(|_| anyhow::anyhow!("the final optimisation panicked"))?
+        })?;
+        telemetry.progress(steps as u32, steps as u32);
+    }
+    let seconds = started.elapsed().as_secs_f64();
+    if !map.is_empty() {
+        write_map_atomically(&map, &out_dir.join("map.ply"))?;
+        write_map_atomically(&map, &out_dir.join(CHECKPOINT))?;
+    }
     let stats = serde_json::json!({
-        "iterations": stage.mapper.iterations(),
-        "seconds": seconds,
-        "iterations_per_s": stage.mapper.iterations() as f64 / seconds.max(1e-9),
+        "iterations": iterations,
+        "seconds": mapping_seconds,
+        "iterations_per_s": iterations as f64 / mapping_seconds.max(1e-9),
         "gaussians": map.len(),
-        "keyframes": stage.mapper.keyframes(),
+        "keyframes": keyframes,
         "bytes_per_gaussian": GaussianMap::bytes_per_gaussian(),
+        "final_optimisation": finish_stats,
+        "total_seconds": seconds,
     });
     std::fs::write(
         out_dir.join("mapper.json"),

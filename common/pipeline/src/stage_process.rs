@@ -29,6 +29,8 @@ pub struct StageProcess {
     pub restarts: u32,
     pub processed: u64,
     pub last_seq: Option<u64>,
+    /// Latest progress of work after the end of data: (steps done, steps planned).
+    pub work: Option<(u32, u32)>,
     child: Option<Child>,
     pid: Option<u32>,
     started_at: Instant,
@@ -70,6 +72,7 @@ impl StageProcess {
             restarts: 0,
             processed: 0,
             last_seq: None,
+            work: None,
             child: None,
             pid: None,
             started_at: Instant::now(),
@@ -162,6 +165,17 @@ impl StageProcess {
                 tracing::warn!("stage {}: wait failed: {e}", self.spec.name);
                 None
             }
+        }
+    }
+
+    /// Sends `signal` to the running process (e.g. the finish signal); false if none runs.
+    pub fn signal(&self, signal: i32) -> bool {
+        match &self.child {
+            Some(child) => {
+                // SAFETY: signalling our own child by pid.
+                unsafe { libc::kill(child.id() as i32, signal) == 0 }
+            }
+            None => false,
         }
     }
 

@@ -18,6 +18,7 @@ use opengs_runtime::{
 use opengs_telemetry::{ChromeTrace, LatencyProfile, LatencyReport, StageSample};
 
 use crate::deploy::{DeployFile, StageRole};
+use crate::final_optimisation::FINISH_SIGNAL;
 use crate::recorder::Recorder;
 use crate::stage_process::{StageProcess, StageState};
 use crate::status::{PipelineStatus, StageStatus};
@@ -105,7 +106,11 @@ impl Supervisor {
             };
             let result = state
                 .start_all(&ch)
-                .and_then(|()| state.main_loop(&ctx, &ch, started));
+                .and_then(|()| state.main_loop(&ctx, &ch, started))
+                .and_then(|ending| match ending {
+                    Ending::EndOfData => state.finish_stages(&ch),
+                    other => Ok(other),
+                });
             // Stop in order whatever happened: the source first, so consumers see the end.
             state.stop_all();
             // Collect what the stages sent before they exited.
@@ -464,6 +469,7 @@ impl RunState {
                     self.trace.record(&name, h.pid, &s);
                 }
                 TelemetryEvent::Dropped => self.profile.record_drop(&name),
+                TelemetryEvent::Progress => stage.work = Some((h.work_done, h.work_total)),
                 TelemetryEvent::Finished => {
                     if stage.spec.role == StageRole::Source && self.end_of_data.is_none() {
                         self.end_of_data = Some((h.stamp.seq, Instant::now()));
@@ -683,6 +689,92 @@ impl RunState {
             }
         }
         Ok(None)
+    }
+
+    /// After the end of data, lets the stages with a `finish_timeout_s` do their final work
+    /// (SIGUSR1) and waits for them to exit, showing their progress. Ctrl-C stops the wait.
+    fn finish_stages(&mut self, ch: &Channels) -> anyhow::Result<Ending> {
+        let finishing: Vec<usize> = (0..self.stages.len())
+            .filter(|&i| self.stages[i].spec.finish_timeout_s > 0.0 && self.stages[i].is_running())
+            .collect();
+        if finishing.is_empty() {
+            return Ok(Ending::EndOfData);
+        }
+        let ws = waitset()?;
+        let err = |e| anyhow::anyhow!("WaitSet attach: {e:?}");
+        let _g = ws
+            .attach_notification(ch.telemetry.listener())
+            .map_err(err)?;
+        let _tick = ws
+            .attach_interval(Duration::from_millis(200))
+            .map_err(err)?;
+        let start = Instant::now();
+        for &i in &finishing {
+            let s = &self.stages[i];
+            s.signal(FINISH_SIGNAL);
+            self.note(&format!(
+                "end of data: {} does its final work (up to {:.0} s; Ctrl-C keeps what is done)",
+                s.spec.name, s.spec.finish_timeout_s
+            ));
+        }
+        let mut last_line = Instant::now();
+        loop {
+            match ws.wait_and_process_once(|_| CallbackProgression::Continue) {
+                Ok(WaitSetRunResult::TerminationRequest | WaitSetRunResult::Interrupt) => {
+                    self.note("interrupted: stopping stages and saving outputs");
+                    return Ok(Ending::Interrupted);
+                }
+                Err(e) => anyhow::bail!("WaitSet: {e:?}"),
+                Ok(_) => {}
+            }
+            self.handle_telemetry(ch);
+            let mut waiting = 0;
+            for &i in &finishing {
+                let stage = &mut self.stages[i];
+                if !stage.is_running() {
+                    continue;
+                }
+                if let Some(status) = stage.poll_exit() {
+                    stage.state = StageState::Finished;
+                    let took = start.elapsed().as_secs_f64();
+                    let msg = if status.success() {
+                        format!("{} finished its final work in {took:.1} s", stage.spec.name)
+                    } else {
+                        format!(
+                            "{} exited ({status}) during its final work; log: {}",
+                            stage.spec.name,
+                            stage.log_path().display()
+                        )
+                    };
+                    self.note(&msg);
+                } else if start.elapsed().as_secs_f64() > stage.spec.finish_timeout_s {
+                    let msg = format!(
+                        "{}: final work past its {:.0} s limit; stopping it (it keeps what is done)",
+                        stage.spec.name, stage.spec.finish_timeout_s
+                    );
+                    stage.stop(Duration::from_secs(30));
+                    self.note(&msg);
+                } else {
+                    waiting += 1;
+                }
+            }
+            if waiting == 0 {
+                return Ok(Ending::EndOfData);
+            }
+            if self.progress.is_some() && last_line.elapsed() > Duration::from_secs(10) {
+                last_line = Instant::now();
+                for &i in &finishing {
+                    let s = &self.stages[i];
+                    if let (true, Some((done, total))) = (s.is_running(), s.work) {
+                        self.note(&format!(
+                            "{}: final work {done}/{total} steps ({:.0} s)",
+                            s.spec.name,
+                            start.elapsed().as_secs_f64()
+                        ));
+                    }
+                }
+            }
+        }
     }
 
     /// Stops every running stage, the source first.

@@ -2,6 +2,7 @@
 //! a run's keyframes in random order, with periodic pruning and, in the first half,
 //! splitting of the Gaussians with the largest positional gradients ([`crate::densify`]).
 
+use std::ops::ControlFlow;
 use std::time::Instant;
 
 use opengs_datasets::RgbdFrame;
@@ -80,13 +81,14 @@ pub struct RefineStats {
 
 /// Optimises `map` for `config.iters` steps on `keyframes` (frame, camera-to-world pose;
 /// frames are `intrinsics`-sized), shuffling their order every pass. `progress(i, loss)`
-/// is called after step i (1-based).
+/// is called after step i (1-based); `ControlFlow::Break` ends the refinement there (the map
+/// is pruned and kept as it is, e.g. on Ctrl-C).
 pub fn refine(
     map: &mut GaussianMap,
     keyframes: &[(RgbdFrame, Pose)],
     intrinsics: Intrinsics,
     config: &RefineConfig,
-    mut progress: impl FnMut(usize, f32),
+    mut progress: impl FnMut(usize, f32) -> ControlFlow<()>,
 ) -> Result<RefineStats, QualityError> {
     if keyframes.is_empty() {
         return Err(QualityError::NoFrames {
@@ -164,7 +166,9 @@ pub fn refine(
         if densify || pruning {
             stats.reset(map.len());
         }
-        progress(i + 1, step.loss.total);
+        if progress(i + 1, step.loss.total).is_break() {
+            break;
+        }
     }
     prune(map, Some(&mut adam), &prune_config);
     let tenth = (losses.len() / 10).max(1);
@@ -176,7 +180,7 @@ pub fn refine(
         }
     };
     Ok(RefineStats {
-        iterations: config.iters,
+        iterations: losses.len(),
         keyframes: keyframes.len(),
         scene_extent: extent,
         gaussians_before,

@@ -1,6 +1,8 @@
 //! End-to-end: a map back-projected from a small synthetic frame renders that frame well,
 //! the dataset path matches timestamps and writes PNGs, and refinement raises PSNR.
 
+use std::ops::ControlFlow;
+
 use opengs_datasets::{RgbdFrame, RgbdSource, SyntheticOptions, SyntheticSource};
 use opengs_eval::TimedPose;
 use opengs_geometry::{Intrinsics, Pose};
@@ -140,7 +142,11 @@ fn refinement_raises_psnr_of_a_perturbed_map() {
         ..RefineConfig::default()
     };
     let mut calls = 0;
-    let stats = refine(&mut map, &keyframes, k, &config, |_, _| calls += 1).expect("refines");
+    let stats = refine(&mut map, &keyframes, k, &config, |_, _| {
+        calls += 1;
+        ControlFlow::Continue(())
+    })
+    .expect("refines");
     let after = evaluate_render_quality(&map, keyframes.clone(), k, 1, None).expect("evaluates");
     println!(
         "refine 100 its: PSNR {:.2} → {:.2} dB, SSIM {:.4} → {:.4}; {stats:?}",
@@ -154,6 +160,30 @@ fn refinement_raises_psnr_of_a_perturbed_map() {
         "{before:?} → {after:?}"
     );
     assert!(after.ssim > before.ssim + 0.2, "{before:?} → {after:?}");
+}
+
+#[test]
+fn refinement_stops_when_the_caller_says_so() {
+    let mut room = small_room();
+    let k = room.intrinsics();
+    let keyframes = posed(&mut room, &[0, 3]);
+    let mut map = backproject(&keyframes[0].0, &keyframes[0].1, &k);
+    let before = map.len();
+    let config = RefineConfig {
+        iters: 100,
+        ..RefineConfig::default()
+    };
+    let stats = refine(&mut map, &keyframes, k, &config, |i, _| {
+        if i == 7 {
+            ControlFlow::Break(())
+        } else {
+            ControlFlow::Continue(())
+        }
+    })
+    .expect("refines");
+    assert_eq!(stats.iterations, 7);
+    assert_eq!(stats.gaussians_before, before);
+    assert_eq!(stats.gaussians_after, map.len());
 }
 
 #[test]

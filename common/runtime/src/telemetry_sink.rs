@@ -53,6 +53,14 @@ impl TelemetrySink {
         self.send(TelemetryEvent::Dropped, input, now, now);
     }
 
+    /// Long work after the end of data: `done` of `total` steps.
+    pub fn progress(&self, done: u32, total: u32) {
+        let header = TelemetryHeader::progress(&self.stage, done.min(total), total, now_ns());
+        if let Err(e) = self.outlet.send_header(header) {
+            tracing::warn!("telemetry from {}: {e}", self.stage);
+        }
+    }
+
     /// End of data; `last` is the stamp of the last input handled.
     pub fn finished(&self, last: &Stamp) {
         let now = now_ns();
