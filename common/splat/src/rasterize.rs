@@ -216,17 +216,20 @@ enum Simd {
     Avx512,
 }
 
-/// Tests set this to exercise the portable kernels on any machine.
-static FORCE_PORTABLE: AtomicBool = AtomicBool::new(false);
+thread_local! {
+    /// Tests set this to exercise the portable kernels on any machine (per calling thread,
+    /// so tests running beside it keep their kernels).
+    static FORCE_PORTABLE: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
+}
 
-/// Forces (or stops forcing) the portable kernels; results are bit-identical either way.
+/// Forces (or stops forcing) the portable kernels on this thread; results are bit-identical.
 #[cfg(test)]
 pub(crate) fn force_portable(on: bool) {
-    FORCE_PORTABLE.store(on, Ordering::Relaxed);
+    FORCE_PORTABLE.with(|f| f.set(on));
 }
 
 fn simd_level() -> Simd {
-    if FORCE_PORTABLE.load(Ordering::Relaxed) {
+    if FORCE_PORTABLE.with(|f| f.get()) {
         return Simd::Portable;
     }
     #[cfg(target_arch = "x86_64")]
