@@ -48,6 +48,8 @@ pub struct RunSummary {
     pub keyframes: usize,
     pub tracking_failures: usize,
     pub elapsed_s: f64,
+    /// Seconds until the data ended (or the run stopped), without the stages' final work.
+    pub streaming_s: f64,
     pub latency: LatencyReport,
     pub restarts: BTreeMap<String, u32>,
     pub interrupted: bool,
@@ -95,6 +97,7 @@ impl Supervisor {
         })?;
         let started = Instant::now();
         let mut state = RunState::new(&opts);
+        let mut streaming_s = 0.0;
         // IPC objects live in this scope so they are gone before the leftover check.
         let ending = {
             let node = ctx.node("supervisor")?;
@@ -107,9 +110,12 @@ impl Supervisor {
             let result = state
                 .start_all(&ch)
                 .and_then(|()| state.main_loop(&ctx, &ch, started))
-                .and_then(|ending| match ending {
-                    Ending::EndOfData => state.finish_stages(&ch),
-                    other => Ok(other),
+                .and_then(|ending| {
+                    streaming_s = started.elapsed().as_secs_f64();
+                    match ending {
+                        Ending::EndOfData => state.finish_stages(&ch),
+                        other => Ok(other),
+                    }
                 });
             // Stop in order whatever happened: the source first, so consumers see the end.
             state.stop_all();
@@ -168,6 +174,11 @@ impl Supervisor {
             keyframes: state.recorder.keyframes(),
             tracking_failures: state.recorder.failures(),
             elapsed_s: started.elapsed().as_secs_f64(),
+            streaming_s: if streaming_s > 0.0 {
+                streaming_s
+            } else {
+                started.elapsed().as_secs_f64()
+            },
             latency,
             restarts: state
                 .stages

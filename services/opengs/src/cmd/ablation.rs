@@ -49,6 +49,8 @@ pub fn run(args: AblationArgs) -> anyhow::Result<()> {
         let mut run = args.run.clone();
         run.ablation = ablation.clone();
         run.out = Some(args.out_root.join(name));
+        // The final optimisation sharpens colour, not labels: skipped unless asked for.
+        run.finish_steps = Some(run.finish_steps.unwrap_or(0));
         let row = match execute(&run) {
             Ok(summary) => {
                 let sem = summary.semantics.as_ref();
