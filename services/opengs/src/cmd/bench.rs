@@ -16,15 +16,9 @@ enum BenchWhat {
     Render(super::bench_render::BenchRenderArgs),
     /// G-ICP registration time and tracker throughput.
     Gicp(super::bench_gicp::BenchGicpArgs),
-    /// One mapping step (forward + backward + Adam) with 100k Gaussians at 640×480 and 320×240.
-    Map {
-        /// Timed steps per case.
-        #[arg(long, default_value_t = 15)]
-        steps: usize,
-        /// Gaussians in the scene.
-        #[arg(long, default_value_t = 100_000)]
-        gaussians: usize,
-    },
+    /// One mapping step (forward + backward + Adam) with 100k Gaussians at 640×480 and
+    /// 320×240; with `--run DIR`, the rates the mapper sustained in that run.
+    Map(super::bench_map::BenchMapArgs),
     /// Label consensus per 640×480 keyframe with ~100 input and ~100 rendered labels (one core).
     Consensus {
         /// Timed keyframes.
@@ -47,20 +41,7 @@ pub fn run(args: BenchArgs) -> anyhow::Result<()> {
         BenchWhat::Ipc(a) => super::bench_ipc::run(a),
         BenchWhat::Render(a) => super::bench_render::run(a),
         BenchWhat::Gicp(a) => super::bench_gicp::run(a),
-        BenchWhat::Map { steps, gaussians } => {
-            let load = std::fs::read_to_string("/proc/loadavg").unwrap_or_default();
-            println!(
-                "mapping step ({steps} timed steps per case, medians; loadavg {})",
-                load.trim()
-            );
-            for (w, h) in [(640, 480), (320, 240)] {
-                println!(
-                    "{}",
-                    opengs_splat::bench_train_steps(gaussians, w, h, steps)
-                );
-            }
-            Ok(())
-        }
+        BenchWhat::Map(a) => super::bench_map::run(a),
         BenchWhat::Consensus { runs } => {
             opengs_semantics::bench::print_consensus_bench(runs);
             Ok(())

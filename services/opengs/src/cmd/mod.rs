@@ -2,6 +2,7 @@ pub mod ablation;
 pub mod bench;
 pub mod bench_gicp;
 pub mod bench_ipc;
+pub mod bench_map;
 pub mod bench_render;
 pub mod ctl;
 pub mod eval;
