@@ -19,6 +19,8 @@ pub struct BenchConfig {
     /// Timed frames per case (after one warm-up frame); each uses the next pose of an arc.
     pub frames: usize,
     pub top_k: usize,
+    /// Also time project / bin+sort / rasterize of one semantic frame per case.
+    pub breakdown: bool,
 }
 
 /// Pinhole camera for a benchmark image size, principal point at the image centre:
@@ -42,6 +44,7 @@ impl Default for BenchConfig {
             ],
             frames: 9,
             top_k: DEFAULT_TOP_K,
+            breakdown: false,
         }
     }
 }
@@ -61,6 +64,12 @@ pub struct BenchRow {
     pub cpu_ms_semantic: f64,
     /// Mean top-K entries stored per pixel.
     pub topk_per_pixel: f64,
+    /// Median ms of colour + depth + labels only, and of colour + depth + top-K only: where
+    /// (b)'s overhead is.
+    pub ms_labels_only: f64,
+    pub ms_top_k_only: f64,
+    /// Project / bin+sort / rasterize of one (b) frame, when asked for.
+    pub breakdown: Option<String>,
 }
 
 impl BenchRow {
@@ -85,7 +94,7 @@ impl fmt::Display for BenchReport {
         )?;
         writeln!(
             f,
-            "{:>9} {:>10} {:>12} {:>8} {:>14} {:>8} {:>9} {:>11} {:>11} {:>8}",
+            "{:>9} {:>10} {:>12} {:>8} {:>14} {:>8} {:>9} {:>11} {:>11} {:>8} {:>11} {:>11}",
             "gaussians",
             "size",
             "col+dep ms",
@@ -95,12 +104,14 @@ impl fmt::Display for BenchReport {
             "overhead",
             "cpu ms (a)",
             "cpu ms (b)",
-            "topK/px"
+            "topK/px",
+            "a+lab ms",
+            "a+topK ms"
         )?;
         for r in &self.rows {
             writeln!(
                 f,
-                "{:>9} {:>10} {:>12.2} {:>8.1} {:>14.2} {:>8.1} {:>8.1}% {:>11.2} {:>11.2} {:>8.1}",
+                "{:>9} {:>10} {:>12.2} {:>8.1} {:>14.2} {:>8.1} {:>8.1}% {:>11.2} {:>11.2} {:>8.1} {:>11.2} {:>11.2}",
                 r.gaussians,
                 format!("{}x{}", r.width, r.height),
                 r.ms_color_depth,
@@ -110,8 +121,20 @@ impl fmt::Display for BenchReport {
                 100.0 * r.overhead(),
                 r.cpu_ms_color_depth,
                 r.cpu_ms_semantic,
-                r.topk_per_pixel
+                r.topk_per_pixel,
+                r.ms_labels_only,
+                r.ms_top_k_only
             )?;
+        }
+        for r in &self.rows {
+            if let Some(b) = &r.breakdown {
+                writeln!(
+                    f,
+                    "(b), {} Gaussians, {}x{}, one frame:",
+                    r.gaussians, r.width, r.height
+                )?;
+                write!(f, "{b}")?;
+            }
         }
         Ok(())
     }
@@ -204,7 +227,24 @@ pub fn run_render_bench(cfg: &BenchConfig) -> BenchReport {
                 .map(|p| Camera::from_pose(*k, p, 0.05))
                 .collect();
             let (a, a_cpu, _) = time_frames(&map, &cams, &RenderRequest::color_depth());
-            let (b, b_cpu, topk) = time_frames(&map, &cams, &RenderRequest::semantic(cfg.top_k));
+            let semantic = RenderRequest::semantic(cfg.top_k);
+            let (b, b_cpu, topk) = time_frames(&map, &cams, &semantic);
+            let labels_only = RenderRequest {
+                labels: true,
+                ..RenderRequest::default()
+            };
+            let top_k_only = RenderRequest {
+                top_k: Some(cfg.top_k),
+                ..RenderRequest::default()
+            };
+            let (ms_labels_only, _, _) = time_frames(&map, &cams, &labels_only);
+            let (ms_top_k_only, _, _) = time_frames(&map, &cams, &top_k_only);
+            let breakdown = cfg.breakdown.then(|| {
+                let mut out = crate::RenderOutput::default();
+                // The second frame, with warm output buffers as the timed frames have.
+                stage_breakdown(&map, &cams[0], &semantic, &mut out);
+                stage_breakdown(&map, &cams[0], &semantic, &mut out)
+            });
             rows.push(BenchRow {
                 gaussians: n,
                 width: k.width,
@@ -214,6 +254,9 @@ pub fn run_render_bench(cfg: &BenchConfig) -> BenchReport {
                 cpu_ms_color_depth: a_cpu,
                 cpu_ms_semantic: b_cpu,
                 topk_per_pixel: topk,
+                ms_labels_only,
+                ms_top_k_only,
+                breakdown,
             });
         }
     }

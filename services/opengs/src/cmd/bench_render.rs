@@ -17,6 +17,9 @@ pub struct BenchRenderArgs {
     /// K of the per-pixel top-K.
     #[arg(long, default_value_t = 50)]
     pub top_k: usize,
+    /// Also print project / bin+sort / rasterize times of one (b) frame per case.
+    #[arg(long)]
+    pub breakdown: bool,
 }
 
 pub fn run(args: BenchRenderArgs) -> anyhow::Result<()> {
@@ -35,6 +38,7 @@ pub fn run(args: BenchRenderArgs) -> anyhow::Result<()> {
             .collect(),
         frames: args.frames,
         top_k: args.top_k,
+        breakdown: args.breakdown,
     };
     print!("{}", run_render_bench(&cfg));
     Ok(())
