@@ -47,6 +47,18 @@ pub fn binary(name: &str) -> PathBuf {
     path
 }
 
+/// `opengs run --quiet --run-id ID --out OUT` with stdout and stderr piped; each test adds
+/// its own options (dataset size, rate, deploy file, ...).
+pub fn opengs_run(run_id: &str, out: &std::path::Path) -> std::process::Command {
+    let mut cmd = std::process::Command::new(binary("opengs"));
+    cmd.args(["run", "--quiet", "--run-id", run_id])
+        .arg("--out")
+        .arg(out)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped());
+    cmd
+}
+
 /// `opengs ctl --run ID status --json`, parsed; `None` while the run does not answer yet.
 pub fn ctl_status(run_id: &str) -> Option<serde_json::Value> {
     let out = std::process::Command::new(binary("opengs"))

@@ -1,9 +1,9 @@
 //! End-to-end mapping: a killed mapper resumes from its checkpoint, and the run ends with a map.
 
-use std::process::{Command, Stdio};
+use std::process::Command;
 use std::time::{Duration, Instant};
 
-use opengs_e2e::{binary, serial, stage_pid, Guard};
+use opengs_e2e::{opengs_run, serial, stage_pid, Guard};
 
 #[test]
 fn killed_mapper_resumes_from_its_checkpoint() {
@@ -31,23 +31,10 @@ role = "source"
     .expect("deploy");
     let out = dir.path().join("run");
     let run_id = format!("t{}-mapper", std::process::id());
-    let run = Command::new(binary("opengs"))
-        .args([
-            "run",
-            "--quiet",
-            "--frames",
-            "240",
-            "--run-id",
-            &run_id,
-            "--max-rate",
-            "15",
-        ])
+    let run = opengs_run(&run_id, &out)
+        .args(["--frames", "240", "--max-rate", "15"])
         .arg("--deploy")
         .arg(&deploy)
-        .arg("--out")
-        .arg(&out)
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
         .spawn()
         .expect("run starts");
     // Wait for a checkpoint, then SIGKILL the mapper.
@@ -122,15 +109,11 @@ fn finishing_run(
     run_id: &str,
     steps: usize,
 ) -> Command {
-    let mut cmd = Command::new(binary("opengs"));
-    cmd.args(["run", "--quiet", "--frames", "100", "--max-rate", "15"])
-        .args(["--finish-steps", &steps.to_string(), "--run-id", run_id])
+    let mut cmd = opengs_run(run_id, out);
+    cmd.args(["--frames", "100", "--max-rate", "15"])
+        .args(["--finish-steps", &steps.to_string()])
         .arg("--deploy")
-        .arg(deploy)
-        .arg("--out")
-        .arg(out)
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped());
+        .arg(deploy);
     cmd
 }
 

@@ -6,7 +6,7 @@ use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 use opengs_datasets::{open_dataset, DatasetSpec};
-use opengs_e2e::{binary, ctl_status, frame_checksum, serial, Guard};
+use opengs_e2e::{binary, ctl_status, frame_checksum, opengs_run, serial, Guard};
 
 fn unique_run_id(tag: &str) -> String {
     format!("t{}-{tag}", std::process::id())
@@ -108,23 +108,10 @@ fn supervisor_restarts_a_killed_stage_and_the_run_finishes_clean() {
     let deploy = write_deploy(dir.path());
     let run_id = unique_run_id("restart");
     let out = dir.path().join("run");
-    let run = Command::new(binary("opengs"))
-        .args([
-            "run",
-            "--quiet",
-            "--run-id",
-            &run_id,
-            "--frames",
-            &N.to_string(),
-            "--max-rate",
-            "30",
-        ])
+    let run = opengs_run(&run_id, &out)
+        .args(["--frames", &N.to_string(), "--max-rate", "30"])
         .arg("--deploy")
         .arg(&deploy)
-        .arg("--out")
-        .arg(&out)
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
         .spawn()
         .expect("opengs run starts");
     let mut run = Guard(run);
@@ -196,15 +183,10 @@ fn ctrl_c_stops_the_run_and_keeps_outputs() {
     let run_id = unique_run_id("sigint");
     let out = dir.path().join("run");
     let mut run = Guard(
-        Command::new(binary("opengs"))
-            .args(["run", "--quiet", "--run-id", &run_id, "--frames", "100000"])
-            .args(["--max-rate", "30"])
+        opengs_run(&run_id, &out)
+            .args(["--frames", "100000", "--max-rate", "30"])
             .arg("--deploy")
             .arg(&deploy)
-            .arg("--out")
-            .arg(&out)
-            .stdout(Stdio::piped())
-            .stderr(Stdio::piped())
             .spawn()
             .expect("opengs run starts"),
     );
@@ -279,13 +261,8 @@ fn edge_deploy_pins_and_nices_stages() {
     let run_id = unique_run_id("edge");
     let out = dir.path().join("run");
     let mut run = Guard(
-        Command::new(binary("opengs"))
-            .args([
-                "run", "--quiet", "--deploy", "edge", "--run-id", &run_id, "--frames", "100000",
-            ])
-            .args(["--max-rate", "30"])
-            .arg("--out")
-            .arg(&out)
+        opengs_run(&run_id, &out)
+            .args(["--deploy", "edge", "--frames", "100000", "--max-rate", "30"])
             .stdout(Stdio::null())
             .stderr(Stdio::null())
             .spawn()

@@ -4,7 +4,7 @@
 use std::path::Path;
 use std::process::Command;
 
-use opengs_e2e::{binary, serial};
+use opengs_e2e::{opengs_run, serial};
 
 /// Frames of the synthetic loop used by these runs, and the sensor rate: slow enough that the
 /// mapper and consensus see most keyframes on a loaded 2-core machine.
@@ -13,10 +13,8 @@ const RATE: &str = "8";
 
 /// `opengs run` on the synthetic room with `segmenter`, into `out`.
 fn command(segmenter: &str, out: &Path, run_id: &str) -> Command {
-    let mut cmd = Command::new(binary("opengs"));
+    let mut cmd = opengs_run(run_id, out);
     cmd.args([
-        "run",
-        "--quiet",
         "--segmenter",
         segmenter,
         "--frames",
@@ -28,11 +26,7 @@ fn command(segmenter: &str, out: &Path, run_id: &str) -> Command {
         // The final optimisation sharpens colour, not labels; it has its own test.
         "--finish-steps",
         "0",
-        "--run-id",
-        run_id,
-    ])
-    .arg("--out")
-    .arg(out);
+    ]);
     cmd
 }
 
@@ -126,11 +120,7 @@ fn killed_consensus_resumes_its_label_table() {
     let dir = tempfile::tempdir().expect("tmp");
     let out = dir.path().join("run");
     let run_id = format!("t{}-sem-kill", std::process::id());
-    let run = command("prior", &out, &run_id)
-        .stdout(std::process::Stdio::piped())
-        .stderr(std::process::Stdio::piped())
-        .spawn()
-        .expect("run starts");
+    let run = command("prior", &out, &run_id).spawn().expect("run starts");
     // Once the consensus has saved its table, SIGKILL it.
     let deadline = std::time::Instant::now() + std::time::Duration::from_secs(120);
     while !out.join("label_table.json").exists() {

@@ -1,9 +1,9 @@
 //! Swapping the segmenter while the pipeline runs: classic → prior → classic.
 
-use std::process::{Command, Stdio};
+use std::process::Command;
 use std::time::{Duration, Instant};
 
-use opengs_e2e::{binary, serial};
+use opengs_e2e::{binary, opengs_run, serial};
 
 fn swap(run_id: &str, to: &str) {
     let out = Command::new(binary("opengs"))
@@ -60,23 +60,10 @@ role = "source"
     .expect("deploy");
     let out = dir.path().join("run");
     let run_id = format!("t{}-swap", std::process::id());
-    let run = Command::new(binary("opengs"))
-        .args([
-            "run",
-            "--quiet",
-            "--frames",
-            "360",
-            "--max-rate",
-            "30",
-            "--run-id",
-            &run_id,
-        ])
+    let run = opengs_run(&run_id, &out)
+        .args(["--frames", "360", "--max-rate", "30"])
         .arg("--deploy")
         .arg(&deploy)
-        .arg("--out")
-        .arg(&out)
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
         .spawn()
         .expect("run starts");
     let log = out.join("logs/probe.log");

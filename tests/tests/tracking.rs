@@ -3,7 +3,7 @@
 use std::path::PathBuf;
 use std::process::Command;
 
-use opengs_e2e::{binary, serial};
+use opengs_e2e::{binary, opengs_run, serial};
 
 fn fr1_xyz() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
@@ -14,10 +14,9 @@ fn fr1_xyz() -> PathBuf {
 fn run(frames: usize, noise: bool) -> serde_json::Value {
     let dir = tempfile::tempdir().expect("tmp");
     let out = dir.path().join("run");
-    let mut cmd = Command::new(binary("opengs"));
+    let run_id = format!("t{}-track{}", std::process::id(), noise as u8);
+    let mut cmd = opengs_run(&run_id, &out);
     cmd.args([
-        "run",
-        "--quiet",
         "--frames",
         &frames.to_string(),
         // Tracking is done when the data ends; the map's final optimisation has its own test.
@@ -25,13 +24,7 @@ fn run(frames: usize, noise: bool) -> serde_json::Value {
         "0",
         "--trajectory",
     ])
-    .arg(fr1_xyz())
-    .arg("--out")
-    .arg(&out)
-    .args([
-        "--run-id",
-        &format!("t{}-track{}", std::process::id(), noise as u8),
-    ]);
+    .arg(fr1_xyz());
     if noise {
         cmd.arg("--noise");
     }
