@@ -38,6 +38,9 @@ pub struct RunOptions {
     pub progress: bool,
     /// Score rendered views against every Nth frame at the end (0 = skip).
     pub quality_every: usize,
+    /// At the end of the data, let stages with a `finish_timeout_s` do their final work
+    /// (else every stage is stopped at once).
+    pub finish_after_data: bool,
 }
 
 /// What a finished run produced.
@@ -113,7 +116,7 @@ impl Supervisor {
                 .and_then(|ending| {
                     streaming_s = started.elapsed().as_secs_f64();
                     match ending {
-                        Ending::EndOfData => state.finish_stages(&ch),
+                        Ending::EndOfData if opts.finish_after_data => state.finish_stages(&ch),
                         other => Ok(other),
                     }
                 });

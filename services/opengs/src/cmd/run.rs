@@ -118,6 +118,7 @@ pub fn execute(args: &RunArgs) -> anyhow::Result<RunSummary> {
         stage_args.insert("consensus".to_string(), flags);
     }
     let finish_steps = args.finish_steps.unwrap_or(DEFAULT_FINISH_STEPS);
+    let mut finish_after_data = false;
     if finish_steps > 0 {
         match deploy.stages.iter().find(|s| s.name == "mapper") {
             Some(m) if m.finish_timeout_s > 0.0 => {
@@ -125,6 +126,7 @@ pub fn execute(args: &RunArgs) -> anyhow::Result<RunSummary> {
                     "mapper".to_string(),
                     vec!["--finish-steps".to_string(), finish_steps.to_string()],
                 );
+                finish_after_data = true;
             }
             Some(_) => eprintln!(
                 "--finish-steps: the mapper in {} has no finish_timeout_s; no final optimisation",
@@ -149,6 +151,7 @@ pub fn execute(args: &RunArgs) -> anyhow::Result<RunSummary> {
         stage_args,
         progress: !args.quiet,
         quality_every: args.quality_every,
+        finish_after_data,
     })
 }
 
