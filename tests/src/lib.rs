@@ -76,6 +76,23 @@ pub fn stage_pid(run_id: &str, stage: &str) -> Option<i32> {
     s["pid"].as_u64().map(|p| p as i32)
 }
 
+/// SIGINT (Ctrl-C) to a running `opengs run`; its exit status, which must come `within`.
+pub fn interrupt(
+    child: &mut std::process::Child,
+    within: std::time::Duration,
+) -> std::process::ExitStatus {
+    // SAFETY: signalling a child process the caller started.
+    unsafe { libc::kill(child.id() as i32, libc::SIGINT) };
+    let started = std::time::Instant::now();
+    loop {
+        if let Some(s) = child.try_wait().expect("wait") {
+            return s;
+        }
+        assert!(started.elapsed() < within, "run did not stop on SIGINT");
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    }
+}
+
 /// Kills a child on drop, so a failing assertion leaves no process behind.
 pub struct Guard(pub std::process::Child);
 

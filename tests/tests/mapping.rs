@@ -3,32 +3,17 @@
 use std::process::Command;
 use std::time::{Duration, Instant};
 
-use opengs_e2e::{opengs_run, serial, stage_pid, Guard};
+use opengs_e2e::{interrupt, opengs_run, serial, stage_pid, Guard};
 
 #[test]
 fn killed_mapper_resumes_from_its_checkpoint() {
     let _serial = serial();
     let dir = tempfile::tempdir().expect("tmp");
-    let deploy = dir.path().join("deploy.toml");
-    std::fs::write(
-        &deploy,
-        r#"description = "test: mapper checkpoints every second"
-terminal_stage = "tracker"
-drain_timeout_s = 10
-[[stages]]
-name = "mapper"
-binary = "opengs-mapper"
-args = ["--checkpoint-every", "1"]
-[[stages]]
-name = "tracker"
-binary = "opengs-tracker"
-[[stages]]
-name = "sensor"
-binary = "opengs-sensor"
-role = "source"
-"#,
-    )
-    .expect("deploy");
+    let deploy = mapping_deploy(
+        dir.path(),
+        "mapper checkpoints every second",
+        r#"args = ["--checkpoint-every", "1"]"#,
+    );
     let out = dir.path().join("run");
     let run_id = format!("t{}-mapper", std::process::id());
     let run = opengs_run(&run_id, &out)
@@ -78,18 +63,20 @@ role = "source"
     );
 }
 
-/// A mapper with a final optimisation, a tracker and the synthetic sensor.
-fn finishing_deploy(dir: &std::path::Path) -> std::path::PathBuf {
+/// A deploy file of the mapper (with `mapper_line` in its stanza), the tracker and the
+/// synthetic sensor.
+fn mapping_deploy(dir: &std::path::Path, what: &str, mapper_line: &str) -> std::path::PathBuf {
     let deploy = dir.join("deploy.toml");
     std::fs::write(
         &deploy,
-        r#"description = "test: mapper with a final optimisation"
+        format!(
+            r#"description = "test: {what}"
 terminal_stage = "tracker"
 drain_timeout_s = 10
 [[stages]]
 name = "mapper"
 binary = "opengs-mapper"
-finish_timeout_s = 300
+{mapper_line}
 [[stages]]
 name = "tracker"
 binary = "opengs-tracker"
@@ -97,7 +84,8 @@ binary = "opengs-tracker"
 name = "sensor"
 binary = "opengs-sensor"
 role = "source"
-"#,
+"#
+        ),
     )
     .expect("deploy");
     deploy
@@ -126,7 +114,11 @@ fn mapper_stats(out: &std::path::Path) -> serde_json::Value {
 fn final_optimisation_runs_after_the_data_and_ctrl_c_keeps_its_map() {
     let _serial = serial();
     let dir = tempfile::tempdir().expect("tmp");
-    let deploy = finishing_deploy(dir.path());
+    let deploy = mapping_deploy(
+        dir.path(),
+        "mapper with a final optimisation",
+        "finish_timeout_s = 300",
+    );
 
     // To the end: the mapper gets the finish signal, runs its steps, then the run ends.
     let out = dir.path().join("full");
@@ -173,19 +165,7 @@ fn final_optimisation_runs_after_the_data_and_ctrl_c_keeps_its_map() {
         );
         std::thread::sleep(Duration::from_millis(100));
     }
-    // SAFETY: signalling our own child.
-    unsafe { libc::kill(run.0.id() as i32, libc::SIGINT) };
-    let started = Instant::now();
-    let status = loop {
-        if let Some(s) = run.0.try_wait().expect("wait") {
-            break s;
-        }
-        assert!(
-            started.elapsed() < Duration::from_secs(30),
-            "run did not stop on SIGINT"
-        );
-        std::thread::sleep(Duration::from_millis(50));
-    };
+    let status = interrupt(&mut run.0, Duration::from_secs(30));
     assert!(status.success());
     let stats = mapper_stats(&out);
     let done = stats["final_optimisation"]["iterations"]

@@ -6,7 +6,7 @@ use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 use opengs_datasets::{open_dataset, DatasetSpec};
-use opengs_e2e::{binary, ctl_status, frame_checksum, opengs_run, serial, Guard};
+use opengs_e2e::{binary, ctl_status, frame_checksum, interrupt, opengs_run, serial, Guard};
 
 fn unique_run_id(tag: &str) -> String {
     format!("t{}-{tag}", std::process::id())
@@ -199,19 +199,7 @@ fn ctrl_c_stops_the_run_and_keeps_outputs() {
         }
         std::thread::sleep(Duration::from_millis(100));
     }
-    // SAFETY: signalling our own child.
-    unsafe { libc::kill(run.0.id() as i32, libc::SIGINT) };
-    let started = Instant::now();
-    let status = loop {
-        if let Some(s) = run.0.try_wait().expect("wait") {
-            break s;
-        }
-        assert!(
-            started.elapsed() < Duration::from_secs(20),
-            "run did not stop on SIGINT"
-        );
-        std::thread::sleep(Duration::from_millis(50));
-    };
+    let status = interrupt(&mut run.0, Duration::from_secs(20));
     assert!(status.success());
     for f in ["latency.json", "trace.json", "run.json"] {
         assert!(out.join(f).exists(), "{f} kept after Ctrl-C");

@@ -5,7 +5,7 @@
 //! texture detail finer than the 2 cm keyframe sampling stays blurred until this pass.
 
 use std::ops::ControlFlow;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
@@ -27,11 +27,6 @@ pub fn finish_requested_flag(ws: &WaitSet) -> anyhow::Result<Arc<AtomicBool>> {
     let flag = Arc::new(AtomicBool::new(false));
     signal_hook::flag::register(FINISH_SIGNAL, Arc::clone(&flag))?;
     Ok(flag)
-}
-
-/// True once the finish signal has arrived.
-pub fn finish_requested(flag: &AtomicBool) -> bool {
-    flag.load(Ordering::Relaxed)
 }
 
 /// Full-resolution keyframes kept for the final optimisation (RGB8 and raw depth: about

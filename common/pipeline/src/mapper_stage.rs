@@ -22,9 +22,7 @@ use opengs_runtime::{
 use opengs_semantics::{CounterPruneRegion, RelabelInstruction};
 use opengs_splat::{read_ply_file, write_ply_file, Camera, GaussianMap};
 
-use crate::final_optimisation::{
-    finish_requested, finish_requested_flag, optimise_final, KeptKeyframes,
-};
+use crate::final_optimisation::{finish_requested_flag, optimise_final, KeptKeyframes};
 
 /// Options of the mapper stage.
 #[derive(clap::Args, Debug, Clone)]
@@ -373,7 +371,7 @@ pub fn run_mapper(ctx: &RunContext, out_dir: &Path, args: &MapperArgs) -> anyhow
         match ws.wait_and_process_once_with_timeout(|_| CallbackProgression::Continue, timeout) {
             Ok(WaitSetRunResult::TerminationRequest) => break,
             // The finish signal interrupts the wait too.
-            Ok(WaitSetRunResult::Interrupt) if !finish_requested(&finish) => break,
+            Ok(WaitSetRunResult::Interrupt) if !finish.load(Ordering::Relaxed) => break,
             Err(e) => anyhow::bail!("WaitSet: {e:?}"),
             Ok(_) => {}
         }
@@ -404,7 +402,7 @@ pub fn run_mapper(ctx: &RunContext, out_dir: &Path, args: &MapperArgs) -> anyhow
                 stage.handle_segments(&pool, &h)?;
             }
         }
-        if finish_requested(&finish) {
+        if finish.load(Ordering::Relaxed) {
             // The last segmented keyframe's consensus still counts; then mapping ends.
             let semantic_done = stage.waiting_segments.is_none() && stage.outstanding.is_none();
             let since = *finishing.get_or_insert_with(Instant::now);
@@ -425,7 +423,8 @@ pub fn run_mapper(ctx: &RunContext, out_dir: &Path, args: &MapperArgs) -> anyhow
     let mapping_seconds = started.elapsed().as_secs_f64();
     let iterations = stage.mapper.iterations();
     let keyframes = stage.mapper.keyframes();
-    if !stage.mapper.map().is_empty() {
+    let finishing = ended_by_finish && stage.kept.is_some();
+    if finishing {
         // The online map is safe before the final optimisation starts.
         stage.checkpoint();
     }
@@ -437,7 +436,7 @@ pub fn run_mapper(ctx: &RunContext, out_dir: &Path, args: &MapperArgs) -> anyhow
     } = stage;
     let mut map = mapper.into_map();
     let mut finish_stats = None;
-    if let (true, Some(kept)) = (ended_by_finish, kept) {
+    if let (true, Some(kept)) = (finishing, kept) {
         let steps = args.finish_steps;
         tracing::info!(
             "end of data: final optimisation, {steps} full-resolution steps on {} keyframes",
@@ -462,28 +461,17 @@ pub fn run_mapper(ctx: &RunContext, out_dir: &Path, args: &MapperArgs) -> anyhow
                     })
                 })
             });
-            let mut last_report = Instant::now();
             let (mut logged_tenth, mut last_log) = (0, Instant::now());
             while !worker.is_finished() {
-                let mut latest = None;
-                while let Ok(p) = rx.recv_timeout(Duration::from_millis(100)) {
-                    latest = Some(p);
-                    if last_report.elapsed() > Duration::from_millis(500) {
-                        break;
-                    }
-                }
-                if let Some((done, loss)) = latest {
-                    if last_report.elapsed() > Duration::from_millis(500) {
-                        telemetry.progress(done as u32, steps as u32);
-                        // Every tenth of the steps, and at least twice a minute.
-                        if done * 10 / steps > logged_tenth || last_log.elapsed().as_secs() >= 30 {
-                            logged_tenth = done * 10 / steps;
-                            last_log = Instant::now();
-                            tracing::info!(
-                                "final optimisation: step {done}/{steps}, loss {loss:.4}"
-                            );
-                        }
-                        last_report = Instant::now();
+                // Twice a second: the newest step's progress, and a look for SIGTERM.
+                std::thread::sleep(Duration::from_millis(500));
+                if let Some((done, loss)) = rx.try_iter().last() {
+                    telemetry.progress(done as u32, steps as u32);
+                    // Every tenth of the steps, and at least twice a minute.
+                    if done * 10 / steps > logged_tenth || last_log.elapsed().as_secs() >= 30 {
+                        logged_tenth = done * 10 / steps;
+                        last_log = Instant::now();
+                        tracing::info!("final optimisation: step {done}/{steps}, loss {loss:.4}");
                     }
                 }
                 // SIGTERM (Ctrl-C, or the supervisor's time limit) keeps what is done.

@@ -12,7 +12,7 @@ use opengs_ipc_schema::{
     ControlCommand, ControlHeader, PoseHeader, TelemetryEvent, TelemetryHeader,
 };
 use opengs_runtime::{
-    waitset, ActiveRun, ActiveRuns, CallbackProgression, Inlet, Outlet, RunContext,
+    waitset, ActiveRun, ActiveRuns, CallbackProgression, Inlet, Outlet, RunContext, WaitSet,
     WaitSetRunResult,
 };
 use opengs_telemetry::{ChromeTrace, LatencyProfile, LatencyReport, StageSample};
@@ -395,13 +395,8 @@ impl RunState {
             .attach_interval(Duration::from_millis(100))
             .map_err(err)?;
         loop {
-            match ws.wait_and_process_once(|_| CallbackProgression::Continue) {
-                Ok(WaitSetRunResult::TerminationRequest | WaitSetRunResult::Interrupt) => {
-                    self.note("interrupted: stopping stages and saving outputs");
-                    return Ok(Ending::Interrupted);
-                }
-                Err(e) => anyhow::bail!("WaitSet: {e:?}"),
-                Ok(_) => {}
+            if self.wait_for_news(&ws)? {
+                return Ok(Ending::Interrupted);
             }
             self.handle_telemetry(ch);
             self.handle_poses(ch);
@@ -705,6 +700,18 @@ impl RunState {
         Ok(None)
     }
 
+    /// Sleeps until a message or the next tick; true on Ctrl-C / SIGTERM.
+    fn wait_for_news(&self, ws: &WaitSet) -> anyhow::Result<bool> {
+        match ws.wait_and_process_once(|_| CallbackProgression::Continue) {
+            Ok(WaitSetRunResult::TerminationRequest | WaitSetRunResult::Interrupt) => {
+                self.note("interrupted: stopping stages and saving outputs");
+                Ok(true)
+            }
+            Err(e) => anyhow::bail!("WaitSet: {e:?}"),
+            Ok(_) => Ok(false),
+        }
+    }
+
     /// After the end of data, lets the stages with a `finish_timeout_s` do their final work
     /// (SIGUSR1) and waits for them to exit, showing their progress. Ctrl-C stops the wait.
     fn finish_stages(&mut self, ch: &Channels) -> anyhow::Result<Ending> {
@@ -733,13 +740,8 @@ impl RunState {
         }
         let mut last_line = Instant::now();
         loop {
-            match ws.wait_and_process_once(|_| CallbackProgression::Continue) {
-                Ok(WaitSetRunResult::TerminationRequest | WaitSetRunResult::Interrupt) => {
-                    self.note("interrupted: stopping stages and saving outputs");
-                    return Ok(Ending::Interrupted);
-                }
-                Err(e) => anyhow::bail!("WaitSet: {e:?}"),
-                Ok(_) => {}
+            if self.wait_for_news(&ws)? {
+                return Ok(Ending::Interrupted);
             }
             self.handle_telemetry(ch);
             let mut waiting = 0;

@@ -27,6 +27,10 @@ impl TelemetrySink {
             start,
             end,
         );
+        self.publish(header);
+    }
+
+    fn publish(&self, header: TelemetryHeader) {
         // Telemetry must never take a stage down: log and go on.
         if let Err(e) = self.outlet.send_header(header) {
             tracing::warn!("telemetry from {}: {e}", self.stage);
@@ -55,10 +59,12 @@ impl TelemetrySink {
 
     /// Long work after the end of data: `done` of `total` steps.
     pub fn progress(&self, done: u32, total: u32) {
-        let header = TelemetryHeader::progress(&self.stage, done.min(total), total, now_ns());
-        if let Err(e) = self.outlet.send_header(header) {
-            tracing::warn!("telemetry from {}: {e}", self.stage);
-        }
+        self.publish(TelemetryHeader::progress(
+            &self.stage,
+            done.min(total),
+            total,
+            now_ns(),
+        ));
     }
 
     /// End of data; `last` is the stamp of the last input handled.

@@ -445,19 +445,16 @@ fn crowded_rows_match_the_reference() {
     let slow = render_reference(&map, &cam, 50);
     assert_eq!(fast.labels.as_ref().expect("asked"), &slow.labels);
     let tk = fast.top_k.as_ref().expect("asked");
-    let mut longest = 0;
+    let mut truncated = 0;
     for y in 0..48 {
         for x in 0..64 {
             let (ids, ws) = tk.pixel(x, y);
             let got: Vec<(u32, f32)> = ids.iter().copied().zip(ws.iter().copied()).collect();
             assert_eq!(&got, &slow.top_k[(y * 64 + x) as usize], "pixel ({x}, {y})");
-            longest = longest.max(fast.n_contrib[(y * 64 + x) as usize]);
+            truncated += (ids.len() == 50) as usize;
         }
     }
-    assert!(
-        longest > 50,
-        "the block's pixels should be truncated to K: {longest}"
-    );
+    assert!(truncated > 0, "the block's pixels should be truncated to K");
     // The portable kernels build the same lists.
     crate::rasterize::force_portable(true);
     let portable = render(&map, &cam, &RenderRequest::semantic_sorted(50)).output;
