@@ -62,6 +62,8 @@ pub struct BenchRow {
     pub cpu_ms_color_depth: f64,
     /// Median CPU ms per frame summed over all threads (b).
     pub cpu_ms_semantic: f64,
+    /// Median over frames of (b) / (a) − 1, each pair rendered back to back.
+    pub overhead: f64,
     /// Mean top-K entries stored per pixel.
     pub topk_per_pixel: f64,
     /// Median ms of colour + depth + labels only, and of colour + depth + top-K only: where
@@ -70,12 +72,6 @@ pub struct BenchRow {
     pub ms_top_k_only: f64,
     /// Project / bin+sort / rasterize of one (b) frame, when asked for.
     pub breakdown: Option<String>,
-}
-
-impl BenchRow {
-    pub fn overhead(&self) -> f64 {
-        self.ms_semantic / self.ms_color_depth - 1.0
-    }
 }
 
 #[derive(Debug, Clone)]
@@ -118,7 +114,7 @@ impl fmt::Display for BenchReport {
                 1000.0 / r.ms_color_depth,
                 r.ms_semantic,
                 1000.0 / r.ms_semantic,
-                100.0 * r.overhead(),
+                100.0 * r.overhead,
                 r.cpu_ms_color_depth,
                 r.cpu_ms_semantic,
                 r.topk_per_pixel,
@@ -196,23 +192,37 @@ fn median(mut v: Vec<f64>) -> f64 {
     v[v.len() / 2]
 }
 
-/// (median wall ms, median CPU ms, top-K entries per pixel) over one frame per camera.
-fn time_frames(map: &GaussianMap, cams: &[Camera], req: &RenderRequest) -> (f64, f64, f64) {
-    // Buffers reused across frames, as a SLAM loop would.
-    let mut r = render(map, &cams[0], req);
-    let mut wall = Vec::with_capacity(cams.len());
-    let mut cpu = Vec::with_capacity(cams.len());
+/// Wall and CPU ms of every frame of one request.
+#[derive(Default)]
+struct Timings {
+    wall: Vec<f64>,
+    cpu: Vec<f64>,
+}
+
+/// Renders every camera with every request, interleaved (camera by camera, the requests in
+/// turn), so a shared machine's slow spells hit all requests alike and the per-frame ratios
+/// stay meaningful. Returns per request its timings, and the last top-K entries per pixel.
+fn time_interleaved(
+    map: &GaussianMap,
+    cams: &[Camera],
+    reqs: &[RenderRequest],
+) -> (Vec<Timings>, f64) {
+    // Buffers reused across frames, as a SLAM loop would (the first render is the warm-up).
+    let mut outs: Vec<_> = reqs.iter().map(|r| render(map, &cams[0], r)).collect();
+    let mut times: Vec<Timings> = reqs.iter().map(|_| Timings::default()).collect();
     let mut topk = 0.0;
     for cam in cams {
-        let (t0, c0) = (Instant::now(), process_cpu_ms());
-        render_into(map, cam, req, &mut r);
-        wall.push(t0.elapsed().as_secs_f64() * 1e3);
-        cpu.push(process_cpu_ms() - c0);
-        if let Some(tk) = &r.output.top_k {
-            topk = tk.entries() as f64 / tk.count.len() as f64;
+        for ((req, out), t) in reqs.iter().zip(&mut outs).zip(&mut times) {
+            let (t0, c0) = (Instant::now(), process_cpu_ms());
+            render_into(map, cam, req, out);
+            t.wall.push(t0.elapsed().as_secs_f64() * 1e3);
+            t.cpu.push(process_cpu_ms() - c0);
+            if let Some(tk) = &out.output.top_k {
+                topk = tk.entries() as f64 / tk.count.len() as f64;
+            }
         }
     }
-    (median(wall), median(cpu), topk)
+    (times, topk)
 }
 
 /// Runs every (scene size × resolution) case and returns the table.
@@ -226,9 +236,7 @@ pub fn run_render_bench(cfg: &BenchConfig) -> BenchReport {
                 .iter()
                 .map(|p| Camera::from_pose(*k, p, 0.05))
                 .collect();
-            let (a, a_cpu, _) = time_frames(&map, &cams, &RenderRequest::color_depth());
             let semantic = RenderRequest::semantic(cfg.top_k);
-            let (b, b_cpu, topk) = time_frames(&map, &cams, &semantic);
             let labels_only = RenderRequest {
                 labels: true,
                 ..RenderRequest::default()
@@ -237,8 +245,14 @@ pub fn run_render_bench(cfg: &BenchConfig) -> BenchReport {
                 top_k: Some(cfg.top_k),
                 ..RenderRequest::default()
             };
-            let (ms_labels_only, _, _) = time_frames(&map, &cams, &labels_only);
-            let (ms_top_k_only, _, _) = time_frames(&map, &cams, &top_k_only);
+            let reqs = [
+                RenderRequest::color_depth(),
+                semantic,
+                labels_only,
+                top_k_only,
+            ];
+            let (t, topk) = time_interleaved(&map, &cams, &reqs);
+            let ratios = t[1].wall.iter().zip(&t[0].wall).map(|(b, a)| b / a);
             let breakdown = cfg.breakdown.then(|| {
                 let mut out = crate::RenderOutput::default();
                 // The second frame, with warm output buffers as the timed frames have.
@@ -249,13 +263,14 @@ pub fn run_render_bench(cfg: &BenchConfig) -> BenchReport {
                 gaussians: n,
                 width: k.width,
                 height: k.height,
-                ms_color_depth: a,
-                ms_semantic: b,
-                cpu_ms_color_depth: a_cpu,
-                cpu_ms_semantic: b_cpu,
+                ms_color_depth: median(t[0].wall.clone()),
+                ms_semantic: median(t[1].wall.clone()),
+                cpu_ms_color_depth: median(t[0].cpu.clone()),
+                cpu_ms_semantic: median(t[1].cpu.clone()),
+                overhead: median(ratios.collect()) - 1.0,
                 topk_per_pixel: topk,
-                ms_labels_only,
-                ms_top_k_only,
+                ms_labels_only: median(t[2].wall.clone()),
+                ms_top_k_only: median(t[3].wall.clone()),
                 breakdown,
             });
         }

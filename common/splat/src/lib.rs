@@ -30,6 +30,7 @@ mod rasterize;
 #[cfg(test)]
 mod reference;
 mod render;
+mod row_log;
 pub mod scene;
 mod ssim;
 mod target;

@@ -4,11 +4,14 @@
 //! Each tile walks its depth-sorted list Gaussian by Gaussian and updates only the rows
 //! where the Gaussian can reach α ≥ 1/255 (exact: other pixels would skip it anyway), one
 //! 16-lane row at a time (one AVX-512 register, two AVX2 ones; a portable build too, all
-//! bit-identical). Voting keeps 3 (label, sum) slots per pixel in the same lane loop (pixels
-//! meeting more labels are re-voted exactly at the end of the tile). For top-K every
-//! contribution is appended to its pixel's list in the tile scratch (one scatter per row
-//! visit, no sorting); at the end of the tile the lists are copied out whole when they fit
-//! in K (the usual case), else their K heaviest are selected; sorted only on request.
+//! bit-identical). For top-K every row visit is logged (one vector of 16 weights, see
+//! `row_log`); at the end of the tile the per-pixel lists are read off the log straight into
+//! the output where a pixel's list fits in K (the usual case), else into scratch lists whose
+//! K heaviest are selected; sorted only on request. Voting with lists needs no sums while a
+//! tile's contributions carry one label (a bit per pixel), then tracks per lane whether a
+//! pixel met a second label and votes those pixels exactly from their lists; without lists
+//! it keeps 3 (label, sum) slots per pixel in the lane loop (pixels meeting more labels are
+//! re-voted exactly at the end of the tile).
 //! Bands of 16 image rows run in parallel (rayon) with per-thread scratch kept across
 //! frames; one kernel is compiled per combination of requested outputs and per SIMD level.
 
@@ -22,15 +25,15 @@ use crate::bin::TileBins;
 use crate::blend::{alpha_of, gaussian_power, MIN_ALPHA, MIN_TRANSMITTANCE};
 use crate::output::{RenderOutput, RenderRequest};
 use crate::project::Projected;
+use crate::row_log::{PixelLists, RowDst, RowLog, STRIDE};
 use crate::tiles::{TileGrid, TILE_SIZE};
 use crate::topk::{key_rank, select_top_k, topk_key, weight_positions, TopKBand};
 use crate::voting::vote;
 
 const T: usize = TILE_SIZE as usize;
 
-/// Contributions per pixel kept in the tile scratch; a pixel with more is replayed exactly
-/// at the end of its tile (rare: opaque surfaces saturate long before).
-const CAP: usize = 128;
+/// Longest list ranked branch-free ([`weight_positions`]); longer ones use a selection.
+const RANK_MAX: usize = 128;
 
 /// Rasterizes projected, binned Gaussians. `labels` are the map's labels (for voting).
 pub fn rasterize(
@@ -113,7 +116,6 @@ pub fn rasterize_into(
         grid,
         labels,
         top_k,
-        vote: request.labels,
         sort_top_k: request.sort_top_k,
         visible: visible.as_deref(),
         simd: simd_level(),
@@ -151,9 +153,7 @@ pub fn rasterize_into(
         .collect();
 
     let lists = top_k.is_some();
-    // With lists, labels are voted from them at the end of the tile (per contribution, not
-    // per row visit); alone, in the lane loop.
-    let lane_vote = request.labels && !(lists && LIST_VOTE);
+    let lane_vote = request.labels;
     bands.into_par_iter().for_each(|mut band| {
         SCRATCH.with(|cell| {
             let mut guard = cell.borrow_mut();
@@ -216,6 +216,19 @@ enum Simd {
     Avx512,
 }
 
+impl Simd {
+    fn is_avx512(self) -> bool {
+        #[cfg(target_arch = "x86_64")]
+        {
+            self == Simd::Avx512
+        }
+        #[cfg(not(target_arch = "x86_64"))]
+        {
+            false
+        }
+    }
+}
+
 thread_local! {
     /// Tests set this to exercise the portable kernels on any machine (per calling thread,
     /// so tests running beside it keep their kernels).
@@ -253,7 +266,6 @@ struct Ctx<'a> {
     grid: &'a TileGrid,
     labels: &'a [u32],
     top_k: Option<usize>,
-    vote: bool,
     sort_top_k: bool,
     visible: Option<&'a [AtomicBool]>,
     simd: Simd,
@@ -293,27 +305,37 @@ struct TileState {
     vote_label: [[[u32; T]; T]; VOTE_SLOTS],
     vote_sum: [[[f32; T]; T]; VOTE_SLOTS],
     vote_overflow: [[u32; T]; T],
+    /// With lists: the one real label the tile's contributions had so far (0: none yet),
+    /// and per row the pixels that took it; per-lane tracking starts at a second label.
+    tile_label: TileLabel,
+}
+
+/// GS Voting with lists, per tile: while every contribution so far has one real label, a
+/// pixel's vote is that label if it took any of it, 0 otherwise (a bit per pixel); once a
+/// second label contributes, slot 0 and the overflow flags take over per lane.
+#[derive(Clone, Copy)]
+struct TileLabel {
+    label: u32,
+    took: [u32; T],
+    per_lane: bool,
 }
 
 /// Label slots per pixel held in vector registers (few labels meet at a pixel).
 const VOTE_SLOTS: usize = 3;
 
-/// Room per pixel list: CAP entries plus 16 of padding, so the last rank block fits and the
-/// lists of consecutive pixels start 9 cache lines apart (every L1 set, no aliasing).
-const STRIDE: usize = CAP + 16;
-
-/// Per-pixel contribution lists of one tile, `[row][lane][slot]`: each pixel's list is
-/// contiguous (copied out with vector moves); a row's 16 appends touch 16 list heads.
-type Slots<V> = [[[V; STRIDE]; T]; T];
+/// Per-pixel contribution lists of one tile, `[row][lane][slot]`, for the pixels whose top-K
+/// is not their whole list front to back (longer than K, or sorted on request).
+type Slots<V> = [PixelLists<V>; T];
 
 struct Scratch {
     st: Box<TileState>,
+    log: RowLog,
     ids: Box<Slots<u32>>,
     ws: Box<Slots<f32>>,
     keys: Vec<u64>,
     votes: Vec<(u32, f32)>,
     replay: Vec<(u32, f32)>,
-    pos: [u32; CAP],
+    pos: [u32; RANK_MAX],
 }
 
 thread_local! {
@@ -346,13 +368,19 @@ impl Scratch {
                 vote_label: [[[0; T]; T]; VOTE_SLOTS],
                 vote_sum: [[[0.0; T]; T]; VOTE_SLOTS],
                 vote_overflow: [[0; T]; T],
+                tile_label: TileLabel {
+                    label: 0,
+                    took: [0; T],
+                    per_lane: false,
+                },
             }),
+            log: RowLog::new(),
             ids: boxed_zeroed::<u32>(),
             ws: boxed_zeroed::<f32>(),
             keys: Vec::new(),
             votes: Vec::new(),
             replay: Vec::new(),
-            pos: [0; CAP],
+            pos: [0; RANK_MAX],
         }
     }
 }
@@ -449,10 +477,19 @@ fn tile_kernel<const LISTS: bool, const VOTE: bool>(ctx: &Ctx, scratch: &mut Scr
     st.last = [[0; T]; T];
     if LISTS {
         st.count = [[0; T]; T];
+        scratch.log.clear();
     }
     if VOTE {
-        st.vote_label = [[[0; T]; T]; VOTE_SLOTS];
-        st.vote_sum = [[[0.0; T]; T]; VOTE_SLOTS];
+        st.tile_label = TileLabel {
+            label: 0,
+            took: [0; T],
+            per_lane: false,
+        };
+        st.vote_label[0] = [[0; T]; T];
+        if !LISTS {
+            st.vote_label[1..].fill([[0; T]; T]);
+            st.vote_sum = [[[0.0; T]; T]; VOTE_SLOTS];
+        }
         st.vote_overflow = [[0; T]; T];
     }
     let mut live = (rows * cols) as u32;
@@ -512,18 +549,18 @@ fn tile_kernel<const LISTS: bool, const VOTE: bool>(ctx: &Ctx, scratch: &mut Scr
                 continue;
             }
             if VOTE && label != 0 {
-                vote_lanes(label, &w, st, ly);
+                if LISTS {
+                    track_label(label, mask, &w, st, ly);
+                } else {
+                    vote_lanes(label, &w, st, ly);
+                }
             }
             if LISTS {
-                push_row(
-                    mask,
-                    gid,
-                    &w,
-                    ly,
-                    &mut st.count,
-                    &mut scratch.ids,
-                    &mut scratch.ws,
-                );
+                // w > 0 exactly where the mask bit is set: a vector compare, not bit extraction.
+                for (c, &wi) in st.count[ly].iter_mut().zip(&w) {
+                    *c += (wi > 0.0) as u32;
+                }
+                scratch.log.push(ly, gid, &w);
             }
             contributed |= mask;
         }
@@ -584,32 +621,6 @@ fn blend_row(
     (mask, newly_done)
 }
 
-/// Appends (Gaussian id, weight) to the list of every pixel in `mask` on tile row `ly`.
-/// Every lane writes its next slot (one scatter; a bit loop reloading lanes of the just
-/// stored weights was slower), but only contributing lanes advance: the others' writes land
-/// past their list's end and are overwritten or ignored. A pixel past CAP keeps counting
-/// (and overwrites its last slot); it is replayed later.
-#[inline(always)]
-fn push_row(
-    mask: u32,
-    gid: u32,
-    w: &[f32; T],
-    ly: usize,
-    count: &mut [[u32; T]; T],
-    ids: &mut Slots<u32>,
-    ws: &mut Slots<f32>,
-) {
-    let count = &mut count[ly];
-    let (ids, ws) = (&mut ids[ly], &mut ws[ly]);
-    for i in 0..T {
-        let n = count[i];
-        let j = (n as usize).min(CAP - 1);
-        ids[i][j] = gid;
-        ws[i][j] = w[i];
-        count[i] = n + ((mask >> i) & 1);
-    }
-}
-
 /// Adds this Gaussian's weights to its label's slot in every lane (branch-free): the first
 /// slot holding the label or still empty takes it; if none, the pixel is flagged.
 #[inline(always)]
@@ -631,6 +642,46 @@ fn vote_lanes(label: u32, w: &[f32; T], st: &mut TileState, ly: usize) {
     let ov = &mut st.vote_overflow[ly];
     for i in 0..T {
         ov[i] |= ((w[i] > 0.0) & pending[i]) as u32;
+    }
+}
+
+/// GS Voting with lists, for one row visit of a Gaussian with real label `label`: a bit OR
+/// while the tile has met one label, per lane after (see [`TileLabel`]).
+#[inline(always)]
+fn track_label(label: u32, mask: u32, w: &[f32; T], st: &mut TileState, ly: usize) {
+    let tl = &mut st.tile_label;
+    if !tl.per_lane {
+        if tl.label == 0 {
+            tl.label = label;
+        }
+        if tl.label == label {
+            tl.took[ly] |= mask;
+            return;
+        }
+        // A second label: the pixels that took the first start slot 0 with it.
+        tl.per_lane = true;
+        for (y, &took) in tl.took.iter().enumerate() {
+            for x in 0..T {
+                st.vote_label[0][y][x] = if (took >> x) & 1 != 0 { tl.label } else { 0 };
+            }
+        }
+    }
+    track_uniform_label(label, w, st, ly);
+}
+
+/// With lists, the lane loop only tracks whether a pixel meets a single real label (slot 0,
+/// no sums: a lone label wins whatever its weight); pixels meeting more are flagged and voted
+/// exactly from their list at the end of the tile. Far cheaper than summing in slots.
+#[inline(always)]
+fn track_uniform_label(label: u32, w: &[f32; T], st: &mut TileState, ly: usize) {
+    let l = &mut st.vote_label[0][ly];
+    let ov = &mut st.vote_overflow[ly];
+    for i in 0..T {
+        // Lanes that took a weight (mask bit set): a vector compare, not bit extraction.
+        let c = w[i] > 0.0;
+        let other = (l[i] != label) & (l[i] != 0);
+        ov[i] |= (c & other) as u32;
+        l[i] = if c { label } else { l[i] };
     }
 }
 
@@ -693,44 +744,98 @@ fn write_tile<const LISTS: bool, const VOTE: bool>(
         band.n_contrib[o..o + cols].copy_from_slice(&st.last[y][..cols]);
     }
     let list = ctx.bins.tile(tile);
+    if LISTS {
+        build_top_k(ctx, scratch, band, x0, rows, cols, list);
+    }
     if VOTE {
         if let Some(labels) = band.labels.as_deref_mut() {
+            let Scratch {
+                st,
+                log,
+                ids,
+                ws,
+                votes,
+                replay,
+                ..
+            } = scratch;
+            let lists = ListsOfTile {
+                st,
+                log,
+                ids,
+                ws,
+                store: band.topk_band.as_deref(),
+                start: band.topk_start.as_deref(),
+            };
             for y in 0..rows {
                 for x in 0..cols {
-                    let label = match slot_label(st, y, x) {
-                        Some(l) => l,
-                        // More labels than slots: vote over the pixel's list (or its replay).
-                        None if LISTS && (st.count[y][x] as usize) <= CAP => {
-                            let n = st.count[y][x] as usize;
-                            let (ids, ws) = (&scratch.ids[y][x][..n], &scratch.ws[y][x][..n]);
-                            let it = ids
-                                .iter()
-                                .zip(ws)
-                                .map(|(&i, &w)| (ctx.labels[i as usize], w));
-                            vote(it, &mut scratch.votes)
-                        }
-                        None => {
-                            let contribs = &mut scratch.replay;
-                            let (px, py) = ((x0 + x) as u32, (band.band * T + y) as u32);
-                            replay_pixel(ctx.projected, list, px, py, contribs);
-                            let it = contribs
-                                .iter()
-                                .map(|&(r, wt)| (ctx.labels[list[r as usize] as usize], wt));
-                            vote(it, &mut scratch.votes)
-                        }
+                    let tl = &st.tile_label;
+                    let resolved = if LISTS && !tl.per_lane {
+                        Some(if (tl.took[y] >> x) & 1 != 0 {
+                            tl.label
+                        } else {
+                            0
+                        })
+                    } else if LISTS {
+                        (st.vote_overflow[y][x] == 0).then_some(st.vote_label[0][y][x])
+                    } else {
+                        slot_label(st, y, x)
                     };
-                    labels[y * w + x0 + x] = label;
+                    let o = y * w + x0 + x;
+                    let label = match resolved {
+                        Some(l) => l,
+                        // More labels than tracked: vote over the pixel's list, or its replay.
+                        None => match lists.pixel(ctx, y, x, o) {
+                            Some((ids, ws)) => vote_list(ids, ws, ctx.labels, votes),
+                            None => {
+                                let (px, py) = ((x0 + x) as u32, (band.band * T + y) as u32);
+                                replay_pixel(ctx.projected, list, px, py, replay);
+                                let it = replay
+                                    .iter()
+                                    .map(|&(r, wt)| (ctx.labels[list[r as usize] as usize], wt));
+                                vote(it, votes)
+                            }
+                        },
+                    };
+                    labels[o] = label;
                 }
             }
         }
     }
-    if LISTS {
-        resolve_top_k(ctx, scratch, band, x0, rows, cols, list);
-    }
 }
 
-/// Vote labels from the per-pixel lists when there are lists.
-const LIST_VOTE: bool = false;
+/// Whether a pixel's top-K is its whole list in front-to-back order (written straight from
+/// the row log into the band store), rather than chosen or sorted from a scratch list.
+#[inline(always)]
+fn top_k_is_whole_list(n: usize, k: usize, sort: bool) -> bool {
+    n <= k && (!sort || n <= 1)
+}
+
+/// Where a finished tile's full per-pixel contribution lists are, after [`build_top_k`].
+struct ListsOfTile<'a> {
+    st: &'a TileState,
+    log: &'a RowLog,
+    ids: &'a Slots<u32>,
+    ws: &'a Slots<f32>,
+    store: Option<&'a TopKBand>,
+    start: Option<&'a [u32]>,
+}
+
+impl<'a> ListsOfTile<'a> {
+    /// Tile pixel (x, y)'s list (band image index `o`), front to back: in the band store or
+    /// the scratch lists; `None` if not kept (its row log overflowed: replay it).
+    fn pixel(&self, ctx: &Ctx, y: usize, x: usize, o: usize) -> Option<(&'a [u32], &'a [f32])> {
+        if self.log.overflowed(y) {
+            return None;
+        }
+        let n = self.st.count[y][x] as usize;
+        if top_k_is_whole_list(n, ctx.top_k?, ctx.sort_top_k) {
+            let (s, store) = (self.start?[o] as usize, self.store?);
+            Some((&store.ids[s..s + n], &store.weights[s..s + n]))
+        } else {
+            Some((&self.ids[y][x][..n], &self.ws[y][x][..n]))
+        }
+    }
+}
 
 /// Label slots of the list vote before it falls back to the general [`vote`].
 const LIST_VOTE_SLOTS: usize = 8;
@@ -799,12 +904,14 @@ fn slot_label(st: &TileState, y: usize, x: usize) -> Option<u32> {
     Some(best.0)
 }
 
-/// Copies each pixel's list (from the slot columns, or replayed past CAP) into the band's
-/// top-K store: all of it, front to back, when it fits in K (the usual case), else its K
-/// heaviest; heaviest first if the request asks for sorting.
+/// Writes the tile's top-K into the band store: each pixel's region (K or fewer entries, in
+/// pixel order) is laid out from the counts, then the row logs are read off into the regions
+/// directly where the top-K is the whole list front to back (the usual case), else into
+/// scratch lists from which the K heaviest are chosen (and sorted on request). Pixels of rows
+/// whose log overflowed are replayed.
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
-fn resolve_top_k(
+fn build_top_k(
     ctx: &Ctx,
     scratch: &mut Scratch,
     band: &mut BandOut,
@@ -814,7 +921,6 @@ fn resolve_top_k(
     list: &[u32],
 ) {
     let w = ctx.grid.width as usize;
-    let st = &*scratch.st;
     let k = ctx.top_k.unwrap_or(usize::MAX);
     let sort = ctx.sort_top_k;
     let (Some(start), Some(count), Some(store)) = (
@@ -824,73 +930,92 @@ fn resolve_top_k(
     ) else {
         return;
     };
-    let mut vote_into = if ctx.vote && LIST_VOTE {
-        band.labels.as_deref_mut()
-    } else {
-        None
-    };
+    let Scratch {
+        st,
+        log,
+        ids: scratch_ids,
+        ws: scratch_ws,
+        keys,
+        replay,
+        pos,
+        ..
+    } = scratch;
+    let at0 = band.topk_len;
     let mut total = 0usize;
     for y in 0..rows {
         for x in 0..cols {
-            total += (st.count[y][x] as usize).min(k);
+            let o = y * w + x0 + x;
+            let m = (st.count[y][x] as usize).min(k);
+            start[o] = (at0 + total) as u32;
+            count[o] = m as u16;
+            total += m;
         }
     }
     // The store keeps last frame's length: grow only (no per-frame memset); the band
     // truncates it to what it used when done.
-    let mut at = band.topk_len;
-    // + SLACK: lists are copied in whole 16-entry blocks; the overhang past a pixel's list
-    // is overwritten by the next one, and past the band's end truncated away.
-    if store.ids.len() < at + total + SLACK {
-        store.ids.resize(at + total + SLACK, 0);
-        store.weights.resize(at + total + SLACK, 0.0);
+    if store.ids.len() < at0 + total {
+        store.ids.resize(at0 + total, 0);
+        store.weights.resize(at0 + total, 0.0);
     }
     band.topk_len += total;
+
+    let avx512 = ctx.simd.is_avx512();
+    let (out_ids, out_ws) = (
+        &mut store.ids[at0..at0 + total],
+        &mut store.weights[at0..at0 + total],
+    );
+    let mut off = 0usize;
+    for (y, (scratch_ids, scratch_ws)) in scratch_ids
+        .iter_mut()
+        .zip(scratch_ws.iter_mut())
+        .enumerate()
+        .take(rows)
+    {
+        let mut dst = RowDst {
+            out_ids: &mut *out_ids,
+            out_ws: &mut *out_ws,
+            off: [0; T],
+            n: [0; T],
+            scratch_ids,
+            scratch_ws,
+            to_scratch: 0,
+        };
+        for x in 0..cols {
+            let n = st.count[y][x] as usize;
+            dst.off[x] = off;
+            dst.n[x] = n;
+            off += n.min(k);
+            if !top_k_is_whole_list(n, k, sort) {
+                dst.to_scratch |= 1 << x;
+            }
+        }
+        if !log.overflowed(y) {
+            log.write_lists(y, avx512, &mut dst);
+        }
+    }
+
     for y in 0..rows {
+        let listed = !log.overflowed(y);
         for x in 0..cols {
             let o = y * w + x0 + x;
             let n = st.count[y][x] as usize;
-            let m = n.min(k);
-            start[o] = at as u32;
-            count[o] = m as u16;
-            if let Some(l) = vote_into.as_deref_mut() {
-                l[o] = if n <= CAP {
-                    let (ids, ws) = (&scratch.ids[y][x][..n], &scratch.ws[y][x][..n]);
-                    vote_list(ids, ws, ctx.labels, &mut scratch.votes)
-                } else {
-                    let (px, py) = ((x0 + x) as u32, (band.band * T + y) as u32);
-                    let replay = &mut scratch.replay;
-                    replay_pixel(ctx.projected, list, px, py, replay);
-                    let it = replay
-                        .iter()
-                        .map(|&(r, wt)| (ctx.labels[list[r as usize] as usize], wt));
-                    vote(it, &mut scratch.votes)
-                };
-            }
-            if n <= k && (!sort || n <= 1) && n <= CAP {
-                // The usual case: the whole list, front to back, straight from the slots.
-                let (src_ids, src_ws) = (&scratch.ids[y][x], &scratch.ws[y][x]);
-                for b in (0..n).step_by(SLACK) {
-                    copy_block(&mut store.ids[at + b..], &src_ids[b..]);
-                    copy_block(&mut store.weights[at + b..], &src_ws[b..]);
-                }
-                at += n;
+            if listed && top_k_is_whole_list(n, k, sort) {
                 continue;
             }
-            let dst_ids = &mut store.ids[at..at + m];
-            let dst_ws = &mut store.weights[at..at + m];
-            at += m;
-            if n <= CAP && (sort || n <= k) {
-                let (ids, ws) = (&scratch.ids[y][x], &mut scratch.ws[y][x]);
-                let pos = &mut scratch.pos;
+            let (s, m) = (start[o] as usize, count[o] as usize);
+            let dst_ids = &mut store.ids[s..s + m];
+            let dst_ws = &mut store.weights[s..s + m];
+            if listed && n <= RANK_MAX && (sort || n <= k) {
+                let (ids, ws) = (&scratch_ids[y][x], &mut scratch_ws[y][x]);
                 // Padding weights of −1 never outrank a real one.
                 let nn = n.div_ceil(16) * 16;
                 ws[n..nn].fill(-1.0);
                 macro_rules! rank_in {
                     ($n:literal) => {
                         weight_positions::<$n>(
-                            ws.first_chunk().expect("STRIDE ≥ CAP"),
+                            ws.first_chunk().expect("STRIDE ≥ RANK_MAX"),
                             n,
-                            pos.first_chunk_mut().expect("CAP ≥ N"),
+                            pos.first_chunk_mut().expect("RANK_MAX ≥ N"),
                         )
                     };
                 }
@@ -910,11 +1035,10 @@ fn resolve_top_k(
                         j += 1;
                     }
                 }
-            } else if n <= CAP {
-                // Unsorted, longer than K: the K-th largest key by selection, then one pass
-                // keeps the keys at or above it, front to back (keys are unique).
-                let (ids, ws) = (&scratch.ids[y][x][..n], &scratch.ws[y][x][..n]);
-                let keys = &mut scratch.keys;
+            } else if listed && !sort {
+                // Longer than K: the K-th largest key by selection, then one pass keeps the
+                // keys at or above it, front to back (keys are unique).
+                let (ids, ws) = (&scratch_ids[y][x][..n], &scratch_ws[y][x][..n]);
                 keys.clear();
                 keys.extend(ws.iter().enumerate().map(|(i, &wt)| topk_key(wt, i as u32)));
                 let (_, &mut kth, _) = keys.select_nth_unstable_by(m - 1, |a, b| b.cmp(a));
@@ -926,11 +1050,18 @@ fn resolve_top_k(
                         j += 1;
                     }
                 }
+            } else if listed {
+                let (ids, ws) = (&scratch_ids[y][x][..n], &scratch_ws[y][x][..n]);
+                keys.clear();
+                keys.extend(ws.iter().enumerate().map(|(i, &wt)| topk_key(wt, i as u32)));
+                for (j, &key) in select_top_k(keys, k, sort).iter().enumerate() {
+                    let i = key_rank(key) as usize;
+                    dst_ids[j] = ids[i];
+                    dst_ws[j] = ws[i];
+                }
             } else {
                 let (px, py) = ((x0 + x) as u32, (band.band * T + y) as u32);
-                let replay = &mut scratch.replay;
                 replay_pixel(ctx.projected, list, px, py, replay);
-                let keys = &mut scratch.keys;
                 keys.clear();
                 keys.extend(
                     replay
@@ -946,14 +1077,4 @@ fn resolve_top_k(
             }
         }
     }
-}
-
-/// Entries copied per block of a pixel's list.
-const SLACK: usize = 16;
-
-/// Copies the first SLACK entries of `src` to `dst` (a fixed size: vector moves, not a
-/// memcpy call per pixel).
-#[inline(always)]
-fn copy_block<V: Copy>(dst: &mut [V], src: &[V]) {
-    dst[..SLACK].copy_from_slice(&src[..SLACK]);
 }

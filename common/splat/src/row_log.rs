@@ -1,0 +1,311 @@
+//! Contribution log of one tile: every row visit (a Gaussian compositing onto some pixels of
+//! a 16-pixel tile row) as one vector of 16 weights (0 where a pixel took nothing) and the
+//! Gaussian's id, in front-to-back order. The lane loop logs with one vector store per visit;
+//! the per-pixel lists (the top-K's input) are read off the log once the tile is done, with
+//! an in-register 16×16 transpose on AVX-512. Appending to 16 per-pixel lists during the
+//! lane loop instead (16 scattered stores per visit) was the top-K's largest cost.
+
+use crate::tiles::TILE_SIZE;
+
+const T: usize = TILE_SIZE as usize;
+
+/// Visits logged per tile row; a row meeting more is marked overflowed and its pixels are
+/// replayed exactly (rare: opaque surfaces end a pixel's compositing long before).
+pub(crate) const ROW_CAP: usize = 256;
+
+pub(crate) struct RowLog {
+    /// `[row][visit]`: the visit's weight per pixel of the row.
+    w: Box<[[[f32; T]; ROW_CAP]; T]>,
+    /// `[row][visit]`: the visit's Gaussian id.
+    g: Box<[[u32; ROW_CAP]; T]>,
+    n: [usize; T],
+    overflowed: [bool; T],
+}
+
+/// A boxed `[a; T]` built on the heap (the log's rows are too big for the stack).
+fn boxed_rows<A: Copy>(a: A) -> Box<[A; T]> {
+    match vec![a; T].into_boxed_slice().try_into() {
+        Ok(b) => b,
+        Err(_) => unreachable!("the vector has T elements"),
+    }
+}
+
+/// Room per scratch pixel list: a full row log plus 16 of padding (a last block of 16).
+pub(crate) const STRIDE: usize = ROW_CAP + 16;
+
+/// Per-pixel contribution lists of one tile row, `[pixel][entry]`.
+pub(crate) type PixelLists<V> = [[V; STRIDE]; T];
+
+/// Where the lists of one tile row go: pixel x's `n[x]` entries go to `scratch_*[x]` if bit x
+/// of `to_scratch` is set, else to `out_*[off[x]..off[x] + n[x]]`.
+pub(crate) struct RowDst<'a> {
+    pub out_ids: &'a mut [u32],
+    pub out_ws: &'a mut [f32],
+    pub off: [usize; T],
+    pub n: [usize; T],
+    pub scratch_ids: &'a mut PixelLists<u32>,
+    pub scratch_ws: &'a mut PixelLists<f32>,
+    pub to_scratch: u32,
+}
+
+impl RowLog {
+    pub fn new() -> Self {
+        Self {
+            w: boxed_rows([[0.0; T]; ROW_CAP]),
+            g: boxed_rows([0; ROW_CAP]),
+            n: [0; T],
+            overflowed: [false; T],
+        }
+    }
+
+    /// Empties the log for the next tile.
+    pub fn clear(&mut self) {
+        self.n = [0; T];
+        self.overflowed = [false; T];
+    }
+
+    /// Logs a visit of Gaussian `gid` to row `y` with per-pixel weights `w`.
+    #[inline(always)]
+    pub fn push(&mut self, y: usize, gid: u32, w: &[f32; T]) {
+        let n = self.n[y];
+        if n < ROW_CAP {
+            self.w[y][n] = *w;
+            self.g[y][n] = gid;
+            self.n[y] = n + 1;
+        } else {
+            self.overflowed[y] = true;
+        }
+    }
+
+    /// Whether row `y` met more than [`ROW_CAP`] visits (its pixels must be replayed).
+    #[inline(always)]
+    pub fn overflowed(&self, y: usize) -> bool {
+        self.overflowed[y]
+    }
+
+    /// Writes each pixel's (id, weight) list of row `y`, front to back, where `dst` says.
+    /// The row must not have overflowed; `dst.n` must be the pixels' contribution counts.
+    #[inline(always)]
+    pub fn write_lists(&self, y: usize, avx512: bool, dst: &mut RowDst) {
+        debug_assert!(!self.overflowed[y]);
+        #[cfg(target_arch = "x86_64")]
+        if avx512 {
+            // SAFETY: the caller passes avx512 only after detecting AVX-512 F on this CPU.
+            unsafe { self.write_lists_avx512(y, dst) };
+            return;
+        }
+        let _ = avx512;
+        let mut len = [0usize; T];
+        for (w, &g) in self.w[y][..self.n[y]].iter().zip(&self.g[y][..self.n[y]]) {
+            for x in 0..T {
+                if w[x] > 0.0 {
+                    if (dst.to_scratch >> x) & 1 != 0 {
+                        dst.scratch_ids[x][len[x]] = g;
+                        dst.scratch_ws[x][len[x]] = w[x];
+                    } else {
+                        dst.out_ids[dst.off[x] + len[x]] = g;
+                        dst.out_ws[dst.off[x] + len[x]] = w[x];
+                    }
+                    len[x] += 1;
+                }
+            }
+        }
+    }
+
+    /// [`RowLog::write_lists`] 16 visits at a time: a 16×16 transpose turns them into 16
+    /// pixel columns, a compress keeps each pixel's contributions, a masked store appends them.
+    ///
+    /// # Safety
+    /// The caller must ensure the CPU supports AVX-512 F.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx512f")]
+    unsafe fn write_lists_avx512(&self, y: usize, dst: &mut RowDst) {
+        use std::arch::x86_64::*;
+        // Each pixel's destination as a pointer and the room behind it (checked below).
+        let mut at_ids = [std::ptr::null_mut::<u32>(); T];
+        let mut at_ws = [std::ptr::null_mut::<f32>(); T];
+        let mut room = [0usize; T];
+        for x in 0..T {
+            if (dst.to_scratch >> x) & 1 != 0 {
+                at_ids[x] = dst.scratch_ids[x].as_mut_ptr();
+                at_ws[x] = dst.scratch_ws[x].as_mut_ptr();
+                room[x] = STRIDE;
+            } else {
+                let (off, n) = (dst.off[x], dst.n[x]);
+                assert!(off + n <= dst.out_ids.len() && off + n <= dst.out_ws.len());
+                // SAFETY: off ≤ len, just checked.
+                at_ids[x] = unsafe { dst.out_ids.as_mut_ptr().add(off) };
+                at_ws[x] = unsafe { dst.out_ws.as_mut_ptr().add(off) };
+                room[x] = n;
+            }
+        }
+        let n = self.n[y];
+        let zero = _mm512_setzero_ps();
+        let mut len = [0usize; T];
+        for b in (0..n).step_by(T) {
+            // Visits past the last read as "no contribution". (Plain loops here and in the
+            // transpose: closures would not inherit the target feature, nor be inlined.)
+            let mut rows = [zero; T];
+            for (v, row) in rows.iter_mut().enumerate().take(n - b) {
+                // SAFETY: in bounds of the visit's 16 weights.
+                *row = unsafe { _mm512_loadu_ps(self.w[y][b + v].as_ptr()) };
+            }
+            let columns = transpose16(rows);
+            // ROW_CAP is a multiple of 16, so the block's 16 ids are in bounds (ids past
+            // the last visit are compressed away with their zero weights).
+            let ids = _mm512_loadu_si512(self.g[y][b..b + T].as_ptr().cast());
+            for x in 0..T {
+                let m = _mm512_cmp_ps_mask::<_CMP_GT_OQ>(columns[x], zero);
+                let c = m.count_ones() as usize;
+                // Memory safety does not rest on the counts matching the log.
+                assert!(len[x] + c <= room[x]);
+                let keep = ((1u32 << c) - 1) as __mmask16;
+                // SAFETY: the masked stores write c elements at len[x], checked in room.
+                unsafe {
+                    _mm512_mask_storeu_ps(
+                        at_ws[x].add(len[x]),
+                        keep,
+                        _mm512_maskz_compress_ps(m, columns[x]),
+                    );
+                    _mm512_mask_storeu_epi32(
+                        at_ids[x].add(len[x]).cast(),
+                        keep,
+                        _mm512_maskz_compress_epi32(m, ids),
+                    );
+                }
+                len[x] += c;
+            }
+        }
+    }
+}
+
+/// Transposes a 16×16 block of f32 (row v, lane x → row x, lane v): 32-bit then 64-bit
+/// interleaves within 128-bit lanes, then two rounds of 128-bit lane shuffles.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f")]
+#[inline]
+fn transpose16(r: [std::arch::x86_64::__m512; T]) -> [std::arch::x86_64::__m512; T] {
+    use std::arch::x86_64::*;
+    let mut out = [_mm512_setzero_ps(); T];
+    // t[2i], t[2i+1]: rows 2i, 2i+1 interleaved (columns 4k, 4k+1 / 4k+2, 4k+3 of lane k).
+    let mut t = out;
+    for i in (0..T).step_by(2) {
+        t[i] = _mm512_unpacklo_ps(r[i], r[i + 1]);
+        t[i + 1] = _mm512_unpackhi_ps(r[i], r[i + 1]);
+    }
+    // u[4g + j], lane k: rows 4g..4g+3 at column 4k + j.
+    let mut u = out;
+    for g in 0..4 {
+        for j in 0..4 {
+            let a = _mm512_castps_pd(t[4 * g + j / 2]);
+            let b = _mm512_castps_pd(t[4 * g + 2 + j / 2]);
+            u[4 * g + j] = _mm512_castpd_ps(if j % 2 == 0 {
+                _mm512_unpacklo_pd(a, b)
+            } else {
+                _mm512_unpackhi_pd(a, b)
+            });
+        }
+    }
+    for j in 0..4 {
+        let v0 = _mm512_shuffle_f32x4::<0x88>(u[j], u[4 + j]);
+        let v1 = _mm512_shuffle_f32x4::<0xDD>(u[j], u[4 + j]);
+        let v2 = _mm512_shuffle_f32x4::<0x88>(u[8 + j], u[12 + j]);
+        let v3 = _mm512_shuffle_f32x4::<0xDD>(u[8 + j], u[12 + j]);
+        out[j] = _mm512_shuffle_f32x4::<0x88>(v0, v2);
+        out[8 + j] = _mm512_shuffle_f32x4::<0xDD>(v0, v2);
+        out[4 + j] = _mm512_shuffle_f32x4::<0x88>(v1, v3);
+        out[12 + j] = _mm512_shuffle_f32x4::<0xDD>(v1, v3);
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Lists of a row with `visits` visits: visit v reaches pixel x when (v + x) % 3 != 0.
+    /// Odd pixels' lists go to the scratch lists, even ones to the output.
+    fn lists(visits: usize, avx512: bool) -> Vec<Vec<(u32, f32)>> {
+        let mut log = RowLog::new();
+        let weight = |v: usize, x: usize| {
+            if !(v + x).is_multiple_of(3) {
+                (v * T + x + 1) as f32
+            } else {
+                0.0
+            }
+        };
+        for v in 0..visits {
+            let w: [f32; T] = std::array::from_fn(|x| weight(v, x));
+            log.push(5, 1000 + v as u32, &w);
+        }
+        let n: [usize; T] =
+            std::array::from_fn(|x| (0..visits).filter(|&v| weight(v, x) > 0.0).count());
+        let mut off = [0usize; T];
+        for x in 1..T {
+            off[x] = off[x - 1] + n[x - 1];
+        }
+        let total = off[T - 1] + n[T - 1];
+        let (mut out_ids, mut out_ws) = (vec![0u32; total], vec![0.0f32; total]);
+        let mut scratch_ids = Box::new([[0u32; STRIDE]; T]);
+        let mut scratch_ws = Box::new([[0.0f32; STRIDE]; T]);
+        let mut dst = RowDst {
+            out_ids: &mut out_ids,
+            out_ws: &mut out_ws,
+            off,
+            n,
+            scratch_ids: &mut scratch_ids,
+            scratch_ws: &mut scratch_ws,
+            to_scratch: 0xAAAA,
+        };
+        log.write_lists(5, avx512, &mut dst);
+        (0..T)
+            .map(|x| {
+                let (ids, ws) = if x % 2 == 1 {
+                    (&scratch_ids[x][..n[x]], &scratch_ws[x][..n[x]])
+                } else {
+                    (
+                        &out_ids[off[x]..off[x] + n[x]],
+                        &out_ws[off[x]..off[x] + n[x]],
+                    )
+                };
+                ids.iter().copied().zip(ws.iter().copied()).collect()
+            })
+            .collect()
+    }
+
+    #[test]
+    fn lists_are_each_pixels_visits_front_to_back() {
+        // 37 visits: two whole 16-visit blocks and a partial one.
+        let got = lists(37, false);
+        for (x, list) in got.iter().enumerate() {
+            let want: Vec<(u32, f32)> = (0..37)
+                .filter(|v| !(v + x).is_multiple_of(3))
+                .map(|v| (1000 + v as u32, (v * T + x + 1) as f32))
+                .collect();
+            assert_eq!(list, &want, "pixel {x}");
+        }
+    }
+
+    #[test]
+    fn avx512_lists_match_portable() {
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx512f") {
+            for visits in [1, 16, 37, ROW_CAP] {
+                assert_eq!(lists(visits, true), lists(visits, false), "{visits} visits");
+            }
+        }
+    }
+
+    #[test]
+    fn a_full_row_overflows() {
+        let mut log = RowLog::new();
+        for v in 0..ROW_CAP {
+            log.push(2, v as u32, &[1.0; T]);
+        }
+        assert!(!log.overflowed(2));
+        log.push(2, 7, &[1.0; T]);
+        assert!(log.overflowed(2) && !log.overflowed(3));
+        log.clear();
+        assert!(!log.overflowed(2));
+    }
+}
