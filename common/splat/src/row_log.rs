@@ -95,19 +95,26 @@ impl RowLog {
             return;
         }
         let _ = avx512;
-        let mut len = [0usize; T];
-        for (w, &g) in self.w[y][..self.n[y]].iter().zip(&self.g[y][..self.n[y]]) {
-            for x in 0..T {
-                if w[x] > 0.0 {
-                    if (dst.to_scratch >> x) & 1 != 0 {
-                        dst.scratch_ids[x][len[x]] = g;
-                        dst.scratch_ws[x][len[x]] = w[x];
-                    } else {
-                        dst.out_ids[dst.off[x] + len[x]] = g;
-                        dst.out_ws[dst.off[x] + len[x]] = w[x];
-                    }
-                    len[x] += 1;
+        let (w, g) = (&self.w[y][..self.n[y]], &self.g[y][..self.n[y]]);
+        // Branch-free walks down the pixels' columns, four at a time (independent chains):
+        // every visit is written, only contributions advance (len ≤ visits < STRIDE).
+        const J: usize = 4;
+        for x0 in (0..T).step_by(J) {
+            let mut len = [0usize; J];
+            for (wv, &gv) in w.iter().zip(g) {
+                for (j, len) in len.iter_mut().enumerate() {
+                    let x = x0 + j;
+                    dst.scratch_ids[x][*len] = gv;
+                    dst.scratch_ws[x][*len] = wv[x];
+                    *len += (wv[x] > 0.0) as usize;
                 }
+            }
+        }
+        for x in 0..T {
+            if (dst.to_scratch >> x) & 1 == 0 {
+                let (off, n) = (dst.off[x], dst.n[x]);
+                dst.out_ids[off..off + n].copy_from_slice(&dst.scratch_ids[x][..n]);
+                dst.out_ws[off..off + n].copy_from_slice(&dst.scratch_ws[x][..n]);
             }
         }
     }
