@@ -117,6 +117,37 @@ fn label_zero_never_beats_a_real_label() {
 }
 
 #[test]
+fn voting_goes_per_pixel_when_a_tile_meets_a_second_label() {
+    // Front to back: a small label-3 Gaussian centred on pixel (34, 24), a label-0 one and a
+    // wide label-4 one on (32, 24). (34, 24): w3 = 0.5 beats w4 < 0.5·0.9. (32, 24):
+    // w3 = 0.5·e^(−2/1.3) = 0.1073 loses to w4 = 0.9·(1 − 0.1073)·0.5 = 0.4017.
+    let mut front = blob(2.0, 0.02, 0.5, [1.0, 0.0, 0.0], 3);
+    front.mean[0] = 2.0 * 2.0 / 100.0;
+    let map = map_of(&[
+        front,
+        blob(2.5, 0.02, 0.5, [0.0; 3], 0),
+        blob(3.0, 0.1, 0.9, [0.0, 1.0, 0.0], 4),
+    ]);
+    let cam = camera(0.05);
+    let slow = render_reference(&map, &cam, 50);
+    for req in [
+        RenderRequest::semantic(50),
+        RenderRequest::semantic_sorted(50),
+    ] {
+        for portable in [false, true] {
+            crate::rasterize::force_portable(portable);
+            let o = render(&map, &cam, &req).output;
+            crate::rasterize::force_portable(false);
+            let labels = o.labels.as_ref().expect("asked");
+            assert_eq!(labels[o.index(34, 24)], 3);
+            assert_eq!(labels[o.index(32, 24)], 4);
+            assert_eq!(labels[o.index(38, 24)], 4);
+            assert_eq!(labels, &slow.labels, "portable {portable}");
+        }
+    }
+}
+
+#[test]
 fn top_k_orders_by_weight_and_truncates() {
     // Front to back opacities; weights w = αT: 0.1, 0.45, 0.09, 0.216, 0.0432, 0.00504.
     let ops = [0.1f32, 0.5, 0.2, 0.6, 0.3, 0.05];
