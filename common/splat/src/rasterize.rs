@@ -25,7 +25,7 @@ use crate::bin::TileBins;
 use crate::blend::{alpha_of, gaussian_power, MIN_ALPHA, MIN_TRANSMITTANCE};
 use crate::output::{RenderOutput, RenderRequest};
 use crate::project::Projected;
-use crate::row_log::{PixelLists, RowDst, RowLog, STRIDE};
+use crate::row_log::{PixelLists, RowDst, RowLog, LIST_CAP, STRIDE};
 use crate::tiles::{TileGrid, TILE_SIZE};
 use crate::topk::{key_rank, select_top_k, topk_key, weight_positions, TopKBand};
 use crate::voting::vote;
@@ -803,6 +803,13 @@ fn write_tile<const LISTS: bool, const VOTE: bool>(
     }
 }
 
+/// Whether a tile pixel with `n` contributions on row `y` has its full list written (in the
+/// band store or the scratch lists); else it is replayed.
+#[inline(always)]
+fn has_list(log: &RowLog, y: usize, n: usize, k: usize, sort: bool) -> bool {
+    !log.overflowed(y) && (n <= LIST_CAP || top_k_is_whole_list(n, k, sort))
+}
+
 /// Whether a pixel's top-K is its whole list in front-to-back order (written straight from
 /// the row log into the band store), rather than chosen or sorted from a scratch list.
 #[inline(always)]
@@ -824,11 +831,12 @@ impl<'a> ListsOfTile<'a> {
     /// Tile pixel (x, y)'s list (band image index `o`), front to back: in the band store or
     /// the scratch lists; `None` if not kept (its row log overflowed: replay it).
     fn pixel(&self, ctx: &Ctx, y: usize, x: usize, o: usize) -> Option<(&'a [u32], &'a [f32])> {
-        if self.log.overflowed(y) {
+        let n = self.st.count[y][x] as usize;
+        let k = ctx.top_k?;
+        if !has_list(self.log, y, n, k, ctx.sort_top_k) {
             return None;
         }
-        let n = self.st.count[y][x] as usize;
-        if top_k_is_whole_list(n, ctx.top_k?, ctx.sort_top_k) {
+        if top_k_is_whole_list(n, k, ctx.sort_top_k) {
             let (s, store) = (self.start?[o] as usize, self.store?);
             Some((&store.ids[s..s + n], &store.weights[s..s + n]))
         } else {
@@ -979,6 +987,7 @@ fn build_top_k(
             scratch_ids,
             scratch_ws,
             to_scratch: 0,
+            skip: 0,
         };
         for x in 0..cols {
             let n = st.count[y][x] as usize;
@@ -986,7 +995,11 @@ fn build_top_k(
             dst.n[x] = n;
             off += n.min(k);
             if !top_k_is_whole_list(n, k, sort) {
-                dst.to_scratch |= 1 << x;
+                if n <= LIST_CAP {
+                    dst.to_scratch |= 1 << x;
+                } else {
+                    dst.skip |= 1 << x;
+                }
             }
         }
         if !log.overflowed(y) {
@@ -995,10 +1008,10 @@ fn build_top_k(
     }
 
     for y in 0..rows {
-        let listed = !log.overflowed(y);
         for x in 0..cols {
             let o = y * w + x0 + x;
             let n = st.count[y][x] as usize;
+            let listed = has_list(log, y, n, k, sort);
             if listed && top_k_is_whole_list(n, k, sort) {
                 continue;
             }

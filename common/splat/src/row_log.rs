@@ -10,8 +10,11 @@ use crate::tiles::TILE_SIZE;
 const T: usize = TILE_SIZE as usize;
 
 /// Visits logged per tile row; a row meeting more is marked overflowed and its pixels are
-/// replayed exactly (rare: opaque surfaces end a pixel's compositing long before).
-pub(crate) const ROW_CAP: usize = 256;
+/// replayed exactly (rare even in dense maps: 500k Gaussians average 120 visits per row).
+pub(crate) const ROW_CAP: usize = 1024;
+
+/// Longest per-pixel list kept in the scratch lists; longer ones are replayed exactly.
+pub(crate) const LIST_CAP: usize = 256;
 
 pub(crate) struct RowLog {
     /// `[row][visit]`: the visit's weight per pixel of the row.
@@ -30,14 +33,15 @@ fn boxed_rows<A: Copy>(a: A) -> Box<[A; T]> {
     }
 }
 
-/// Room per scratch pixel list: a full row log plus 16 of padding (a last block of 16).
-pub(crate) const STRIDE: usize = ROW_CAP + 16;
+/// Room per scratch pixel list: LIST_CAP plus 16 of padding (a last block of 16).
+pub(crate) const STRIDE: usize = LIST_CAP + 16;
 
 /// Per-pixel contribution lists of one tile row, `[pixel][entry]`.
 pub(crate) type PixelLists<V> = [[V; STRIDE]; T];
 
-/// Where the lists of one tile row go: pixel x's `n[x]` entries go to `scratch_*[x]` if bit x
-/// of `to_scratch` is set, else to `out_*[off[x]..off[x] + n[x]]`.
+/// Where the lists of one tile row go: pixel x's `n[x]` entries go nowhere if bit x of
+/// `skip` is set (the caller replays it), to `scratch_*[x]` if bit x of `to_scratch` is set
+/// (n ≤ LIST_CAP), else to `out_*[off[x]..off[x] + n[x]]`.
 pub(crate) struct RowDst<'a> {
     pub out_ids: &'a mut [u32],
     pub out_ws: &'a mut [f32],
@@ -46,6 +50,7 @@ pub(crate) struct RowDst<'a> {
     pub scratch_ids: &'a mut PixelLists<u32>,
     pub scratch_ws: &'a mut PixelLists<f32>,
     pub to_scratch: u32,
+    pub skip: u32,
 }
 
 impl RowLog {
@@ -96,10 +101,20 @@ impl RowLog {
         }
         let _ = avx512;
         let (w, g) = (&self.w[y][..self.n[y]], &self.g[y][..self.n[y]]);
+        // Pixels whose list fits the scratch: walked there (then copied out if bound for the
+        // output). Others go straight to the output, or nowhere if skipped.
+        let mut fits = 0u32;
+        for x in 0..T {
+            fits |= ((dst.n[x] <= LIST_CAP && (dst.skip >> x) & 1 == 0) as u32) << x;
+        }
         // Branch-free walks down the pixels' columns, four at a time (independent chains):
-        // every visit is written, only contributions advance (len ≤ visits < STRIDE).
+        // every visit is written, only contributions advance (len ≤ n ≤ LIST_CAP < STRIDE).
         const J: usize = 4;
         for x0 in (0..T).step_by(J) {
+            if (fits >> x0) & ((1 << J) - 1) != (1 << J) - 1 {
+                self.walk_columns_one_by_one(y, x0..x0 + J, fits, dst);
+                continue;
+            }
             let mut len = [0usize; J];
             for (wv, &gv) in w.iter().zip(g) {
                 for (j, len) in len.iter_mut().enumerate() {
@@ -111,10 +126,42 @@ impl RowLog {
             }
         }
         for x in 0..T {
-            if (dst.to_scratch >> x) & 1 == 0 {
+            if (fits >> x) & 1 != 0 && (dst.to_scratch >> x) & 1 == 0 {
                 let (off, n) = (dst.off[x], dst.n[x]);
                 dst.out_ids[off..off + n].copy_from_slice(&dst.scratch_ids[x][..n]);
                 dst.out_ws[off..off + n].copy_from_slice(&dst.scratch_ws[x][..n]);
+            }
+        }
+    }
+
+    /// The walk of [`RowLog::write_lists`] for pixels `xs`, one at a time: into the scratch if
+    /// the list `fits`, else straight into the output unless skipped.
+    #[inline(never)]
+    fn walk_columns_one_by_one(
+        &self,
+        y: usize,
+        xs: std::ops::Range<usize>,
+        fits: u32,
+        dst: &mut RowDst,
+    ) {
+        let (w, g) = (&self.w[y][..self.n[y]], &self.g[y][..self.n[y]]);
+        for x in xs {
+            let mut len = 0usize;
+            if (fits >> x) & 1 != 0 {
+                for (wv, &gv) in w.iter().zip(g) {
+                    dst.scratch_ids[x][len] = gv;
+                    dst.scratch_ws[x][len] = wv[x];
+                    len += (wv[x] > 0.0) as usize;
+                }
+            } else if (dst.skip >> x) & 1 == 0 {
+                let off = dst.off[x];
+                for (wv, &gv) in w.iter().zip(g) {
+                    if wv[x] > 0.0 {
+                        dst.out_ids[off + len] = gv;
+                        dst.out_ws[off + len] = wv[x];
+                        len += 1;
+                    }
+                }
             }
         }
     }
@@ -133,7 +180,9 @@ impl RowLog {
         let mut at_ws = [std::ptr::null_mut::<f32>(); T];
         let mut room = [0usize; T];
         for x in 0..T {
-            if (dst.to_scratch >> x) & 1 != 0 {
+            if (dst.skip >> x) & 1 != 0 {
+                continue;
+            } else if (dst.to_scratch >> x) & 1 != 0 {
                 at_ids[x] = dst.scratch_ids[x].as_mut_ptr();
                 at_ws[x] = dst.scratch_ws[x].as_mut_ptr();
                 room[x] = STRIDE;
@@ -162,6 +211,9 @@ impl RowLog {
             // the last visit are compressed away with their zero weights).
             let ids = _mm512_loadu_si512(self.g[y][b..b + T].as_ptr().cast());
             for x in 0..T {
+                if (dst.skip >> x) & 1 != 0 {
+                    continue;
+                }
                 let m = _mm512_cmp_ps_mask::<_CMP_GT_OQ>(columns[x], zero);
                 let c = m.count_ones() as usize;
                 // Memory safety does not rest on the counts matching the log.
@@ -230,9 +282,15 @@ fn transpose16(r: [std::arch::x86_64::__m512; T]) -> [std::arch::x86_64::__m512;
 mod tests {
     use super::*;
 
-    /// Lists of a row with `visits` visits: visit v reaches pixel x when (v + x) % 3 != 0.
-    /// Odd pixels' lists go to the scratch lists, even ones to the output.
-    fn lists(visits: usize, avx512: bool) -> Vec<Vec<(u32, f32)>> {
+    /// Lists of a row with `visits` visits (visit v reaches pixel x when (v + x) % 3 != 0),
+    /// pixel x's going to the scratch lists if bit x of `to_scratch` is set, nowhere (None)
+    /// if bit x of `skip` is, else to the output.
+    fn lists(
+        visits: usize,
+        avx512: bool,
+        to_scratch: u32,
+        skip: u32,
+    ) -> Vec<Option<Vec<(u32, f32)>>> {
         let mut log = RowLog::new();
         let weight = |v: usize, x: usize| {
             if !(v + x).is_multiple_of(3) {
@@ -262,12 +320,15 @@ mod tests {
             n,
             scratch_ids: &mut scratch_ids,
             scratch_ws: &mut scratch_ws,
-            to_scratch: 0xAAAA,
+            to_scratch,
+            skip,
         };
         log.write_lists(5, avx512, &mut dst);
         (0..T)
             .map(|x| {
-                let (ids, ws) = if x % 2 == 1 {
+                let (ids, ws) = if (skip >> x) & 1 != 0 {
+                    return None;
+                } else if (to_scratch >> x) & 1 != 0 {
                     (&scratch_ids[x][..n[x]], &scratch_ws[x][..n[x]])
                 } else {
                     (
@@ -275,30 +336,63 @@ mod tests {
                         &out_ws[off[x]..off[x] + n[x]],
                     )
                 };
-                ids.iter().copied().zip(ws.iter().copied()).collect()
+                Some(ids.iter().copied().zip(ws.iter().copied()).collect())
             })
             .collect()
     }
 
     #[test]
     fn lists_are_each_pixels_visits_front_to_back() {
-        // 37 visits: two whole 16-visit blocks and a partial one.
-        let got = lists(37, false);
+        // 37 visits: two whole 16-visit blocks and a partial one; odd pixels to the scratch.
+        let got = lists(37, false, 0xAAAA, 0);
         for (x, list) in got.iter().enumerate() {
             let want: Vec<(u32, f32)> = (0..37)
                 .filter(|v| !(v + x).is_multiple_of(3))
                 .map(|v| (1000 + v as u32, (v * T + x + 1) as f32))
                 .collect();
-            assert_eq!(list, &want, "pixel {x}");
+            assert_eq!(list.as_ref(), Some(&want), "pixel {x}");
+        }
+    }
+
+    #[test]
+    fn skipped_pixels_may_have_more_than_the_scratch_holds() {
+        // A full log: every pixel has ~683 contributions; pixels 0–3 and 9 go to the output,
+        // the rest are skipped (they would not fit the scratch lists).
+        let skip = !0x20F & 0xFFFF;
+        for avx512 in [false, avx512_here()] {
+            let got = lists(ROW_CAP, avx512, 0, skip);
+            for (x, list) in got.iter().enumerate() {
+                assert_eq!(list.is_none(), (skip >> x) & 1 != 0, "pixel {x}");
+                if let Some(list) = list {
+                    assert!(list.len() > LIST_CAP);
+                    assert!(list.iter().zip(&list[1..]).all(|(a, b)| a.0 < b.0));
+                }
+            }
+        }
+    }
+
+    fn avx512_here() -> bool {
+        #[cfg(target_arch = "x86_64")]
+        {
+            std::arch::is_x86_feature_detected!("avx512f")
+        }
+        #[cfg(not(target_arch = "x86_64"))]
+        {
+            false
         }
     }
 
     #[test]
     fn avx512_lists_match_portable() {
-        #[cfg(target_arch = "x86_64")]
-        if std::arch::is_x86_feature_detected!("avx512f") {
-            for visits in [1, 16, 37, ROW_CAP] {
-                assert_eq!(lists(visits, true), lists(visits, false), "{visits} visits");
+        if avx512_here() {
+            for visits in [1, 16, 37, 200] {
+                for (to_scratch, skip) in [(0xAAAA, 0), (0x00F0, 0x0F00)] {
+                    assert_eq!(
+                        lists(visits, true, to_scratch, skip),
+                        lists(visits, false, to_scratch, skip),
+                        "{visits} visits"
+                    );
+                }
             }
         }
     }
