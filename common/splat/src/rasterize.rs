@@ -7,11 +7,11 @@
 //! bit-identical). For top-K every row visit is logged (one vector of 16 weights, see
 //! `row_log`); at the end of the tile the per-pixel lists are read off the log straight into
 //! the output where a pixel's list fits in K (the usual case), else into scratch lists whose
-//! K heaviest are selected; sorted only on request. Voting with lists needs no sums while a
-//! tile's contributions carry one label (a bit per pixel), then tracks per lane whether a
-//! pixel met a second label and votes those pixels exactly from their lists; without lists
-//! it keeps 3 (label, sum) slots per pixel in the lane loop (pixels meeting more labels are
-//! re-voted exactly at the end of the tile).
+//! K heaviest are selected; sorted only on request. Voting needs no sums while a tile's
+//! contributions carry one real label (a bit per pixel). At a second label it goes per
+//! lane: with lists, a flag per pixel that met another label, and those pixels are voted
+//! exactly from their lists; without, 3 (label, sum) slots per pixel (pixels meeting more
+//! labels are re-voted exactly at the end of the tile).
 //! Bands of 16 image rows run in parallel (rayon) with per-thread scratch kept across
 //! frames; one kernel is compiled per combination of requested outputs and per SIMD level.
 
@@ -305,14 +305,15 @@ struct TileState {
     vote_label: [[[u32; T]; T]; VOTE_SLOTS],
     vote_sum: [[[f32; T]; T]; VOTE_SLOTS],
     vote_overflow: [[u32; T]; T],
-    /// With lists: the one real label the tile's contributions had so far (0: none yet),
-    /// and per row the pixels that took it; per-lane tracking starts at a second label.
+    /// The one real label the tile's contributions had so far (0: none yet), and per row
+    /// the pixels that took it; per-lane voting starts at a second label.
     tile_label: TileLabel,
 }
 
-/// GS Voting with lists, per tile: while every contribution so far has one real label, a
-/// pixel's vote is that label if it took any of it, 0 otherwise (a bit per pixel); once a
-/// second label contributes, slot 0 and the overflow flags take over per lane.
+/// GS Voting per tile: while every contribution so far has one real label, a pixel's vote is
+/// that label if it took any of it, 0 otherwise (a bit per pixel); once a second label
+/// contributes, the lanes take over (slot 0 starts with the first label): with lists, slot 0
+/// and the overflow flags; without, the summing slots, whose slot 0 sum was kept all along.
 #[derive(Clone, Copy)]
 struct TileLabel {
     label: u32,
@@ -549,11 +550,7 @@ fn tile_kernel<const LISTS: bool, const VOTE: bool>(ctx: &Ctx, scratch: &mut Scr
                 continue;
             }
             if VOTE && label != 0 {
-                if LISTS {
-                    track_label(label, mask, &w, st, ly);
-                } else {
-                    vote_lanes(label, &w, st, ly);
-                }
+                track_label::<LISTS>(label, mask, &w, st, ly);
             }
             if LISTS {
                 // w > 0 exactly where the mask bit is set: a vector compare, not bit extraction.
@@ -645,10 +642,16 @@ fn vote_lanes(label: u32, w: &[f32; T], st: &mut TileState, ly: usize) {
     }
 }
 
-/// GS Voting with lists, for one row visit of a Gaussian with real label `label`: a bit OR
-/// while the tile has met one label, per lane after (see [`TileLabel`]).
+/// GS Voting for one row visit of a Gaussian with real label `label`: a bit OR (and, without
+/// lists, slot 0's sum) while the tile has met one label, per lane after (see [`TileLabel`]).
 #[inline(always)]
-fn track_label(label: u32, mask: u32, w: &[f32; T], st: &mut TileState, ly: usize) {
+fn track_label<const LISTS: bool>(
+    label: u32,
+    mask: u32,
+    w: &[f32; T],
+    st: &mut TileState,
+    ly: usize,
+) {
     let tl = &mut st.tile_label;
     if !tl.per_lane {
         if tl.label == 0 {
@@ -656,6 +659,12 @@ fn track_label(label: u32, mask: u32, w: &[f32; T], st: &mut TileState, ly: usiz
         }
         if tl.label == label {
             tl.took[ly] |= mask;
+            if !LISTS {
+                // Slot 0's sum, in the order the slot vote would add it (0 where no weight).
+                for (s, &wi) in st.vote_sum[0][ly].iter_mut().zip(w) {
+                    *s += wi;
+                }
+            }
             return;
         }
         // A second label: the pixels that took the first start slot 0 with it.
@@ -666,7 +675,11 @@ fn track_label(label: u32, mask: u32, w: &[f32; T], st: &mut TileState, ly: usiz
             }
         }
     }
-    track_uniform_label(label, w, st, ly);
+    if LISTS {
+        track_uniform_label(label, w, st, ly);
+    } else {
+        vote_lanes(label, w, st, ly);
+    }
 }
 
 /// With lists, the lane loop only tracks whether a pixel meets a single real label (slot 0,
@@ -769,7 +782,7 @@ fn write_tile<const LISTS: bool, const VOTE: bool>(
             for y in 0..rows {
                 for x in 0..cols {
                     let tl = &st.tile_label;
-                    let resolved = if LISTS && !tl.per_lane {
+                    let resolved = if !tl.per_lane {
                         Some(if (tl.took[y] >> x) & 1 != 0 {
                             tl.label
                         } else {

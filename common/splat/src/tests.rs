@@ -130,9 +130,14 @@ fn voting_goes_per_pixel_when_a_tile_meets_a_second_label() {
     ]);
     let cam = camera(0.05);
     let slow = render_reference(&map, &cam, 50);
+    let only_labels = RenderRequest {
+        labels: true,
+        ..RenderRequest::default()
+    };
     for req in [
         RenderRequest::semantic(50),
         RenderRequest::semantic_sorted(50),
+        only_labels,
     ] {
         for portable in [false, true] {
             crate::rasterize::force_portable(portable);
