@@ -8,10 +8,9 @@
 //! `row_log`); at the end of the tile the per-pixel lists are read off the log straight into
 //! the output where a pixel's list fits in K (the usual case), else into scratch lists whose
 //! K heaviest are selected; sorted only on request. Voting needs no sums while a tile's
-//! contributions carry one real label (a bit per pixel). At a second label it goes per
-//! lane: with lists, a flag per pixel that met another label, and those pixels are voted
-//! exactly from their lists; without, 3 (label, sum) slots per pixel (pixels meeting more
-//! labels are re-voted exactly at the end of the tile).
+//! contributions carry one real label (a bit per pixel, and slot 0's sum); from a second
+//! label on, 3 (label, sum) slots per pixel in the lane loop (pixels meeting more labels
+//! are voted exactly at the end of the tile, from their list or a replay).
 //! Bands of 16 image rows run in parallel (rayon) with per-thread scratch kept across
 //! frames; one kernel is compiled per combination of requested outputs and per SIMD level.
 
@@ -300,7 +299,7 @@ struct TileState {
     row_live: [u32; T],
     /// Contributions per pixel so far (lists mode).
     count: [[u32; T]; T],
-    /// GS Voting without lists: VOTE_SLOTS (label, weight sum) slots per pixel, filled in
+    /// GS Voting from a second label on: VOTE_SLOTS (label, weight sum) slots per pixel, filled in
     /// order; a pixel meeting more labels is flagged and re-walked exactly at the end.
     vote_label: [[[u32; T]; T]; VOTE_SLOTS],
     vote_sum: [[[f32; T]; T]; VOTE_SLOTS],
@@ -312,8 +311,8 @@ struct TileState {
 
 /// GS Voting per tile: while every contribution so far has one real label, a pixel's vote is
 /// that label if it took any of it, 0 otherwise (a bit per pixel); once a second label
-/// contributes, the lanes take over (slot 0 starts with the first label): with lists, slot 0
-/// and the overflow flags; without, the summing slots, whose slot 0 sum was kept all along.
+/// contributes, the summing slots take over, slot 0 starting with the first label and the
+/// sum kept for it all along.
 #[derive(Clone, Copy)]
 struct TileLabel {
     label: u32,
@@ -486,11 +485,8 @@ fn tile_kernel<const LISTS: bool, const VOTE: bool>(ctx: &Ctx, scratch: &mut Scr
             took: [0; T],
             per_lane: false,
         };
-        st.vote_label[0] = [[0; T]; T];
-        if !LISTS {
-            st.vote_label[1..].fill([[0; T]; T]);
-            st.vote_sum = [[[0.0; T]; T]; VOTE_SLOTS];
-        }
+        st.vote_label = [[[0; T]; T]; VOTE_SLOTS];
+        st.vote_sum = [[[0.0; T]; T]; VOTE_SLOTS];
         st.vote_overflow = [[0; T]; T];
     }
     let mut live = (rows * cols) as u32;
@@ -642,8 +638,8 @@ fn vote_lanes(label: u32, w: &[f32; T], st: &mut TileState, ly: usize) {
     }
 }
 
-/// GS Voting for one row visit of a Gaussian with real label `label`: a bit OR (and, without
-/// lists, slot 0's sum) while the tile has met one label, per lane after (see [`TileLabel`]).
+/// GS Voting for one row visit of a Gaussian with real label `label`: a bit OR and slot 0's
+/// sum while the tile has met one label, the summing slots after (see [`TileLabel`]).
 #[inline(always)]
 fn track_label<const LISTS: bool>(
     label: u32,
@@ -659,7 +655,7 @@ fn track_label<const LISTS: bool>(
         }
         if tl.label == label {
             tl.took[ly] |= mask;
-            if !LISTS {
+            {
                 // Slot 0's sum, in the order the slot vote would add it (0 where no weight).
                 for (s, &wi) in st.vote_sum[0][ly].iter_mut().zip(w) {
                     *s += wi;
@@ -675,27 +671,7 @@ fn track_label<const LISTS: bool>(
             }
         }
     }
-    if LISTS {
-        track_uniform_label(label, w, st, ly);
-    } else {
-        vote_lanes(label, w, st, ly);
-    }
-}
-
-/// With lists, the lane loop only tracks whether a pixel meets a single real label (slot 0,
-/// no sums: a lone label wins whatever its weight); pixels meeting more are flagged and voted
-/// exactly from their list at the end of the tile. Far cheaper than summing in slots.
-#[inline(always)]
-fn track_uniform_label(label: u32, w: &[f32; T], st: &mut TileState, ly: usize) {
-    let l = &mut st.vote_label[0][ly];
-    let ov = &mut st.vote_overflow[ly];
-    for i in 0..T {
-        // Lanes that took a weight (mask bit set): a vector compare, not bit extraction.
-        let c = w[i] > 0.0;
-        let other = (l[i] != label) & (l[i] != 0);
-        ov[i] |= (c & other) as u32;
-        l[i] = if c { label } else { l[i] };
-    }
+    vote_lanes(label, w, st, ly);
 }
 
 /// Weights (tile rank, α·T) of one pixel's contributions, front to back: the kernel's
@@ -788,8 +764,6 @@ fn write_tile<const LISTS: bool, const VOTE: bool>(
                         } else {
                             0
                         })
-                    } else if LISTS {
-                        (st.vote_overflow[y][x] == 0).then_some(st.vote_label[0][y][x])
                     } else {
                         slot_label(st, y, x)
                     };
