@@ -299,8 +299,9 @@ struct TileState {
     row_live: [u32; T],
     /// Contributions per pixel so far (lists mode).
     count: [[u32; T]; T],
-    /// GS Voting from a second label on: VOTE_SLOTS (label, weight sum) slots per pixel, filled in
-    /// order; a pixel meeting more labels is flagged and re-walked exactly at the end.
+    /// GS Voting from a tile's second label on: VOTE_SLOTS (label, weight sum) slots per
+    /// pixel, filled in order; a pixel meeting more labels is flagged and voted exactly at
+    /// the end.
     vote_label: [[[u32; T]; T]; VOTE_SLOTS],
     vote_sum: [[[f32; T]; T]; VOTE_SLOTS],
     vote_overflow: [[u32; T]; T],
