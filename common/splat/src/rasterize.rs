@@ -152,14 +152,13 @@ pub fn rasterize_into(
         .collect();
 
     let lists = top_k.is_some();
-    let lane_vote = request.labels;
     bands.into_par_iter().for_each(|mut band| {
         SCRATCH.with(|cell| {
             let mut guard = cell.borrow_mut();
             let scratch = guard.get_or_insert_with(Scratch::new);
             for tx in 0..grid.tiles_x as usize {
                 // One monomorphised kernel per combination, so unrequested outputs cost nothing.
-                match (lists, lane_vote) {
+                match (lists, request.labels) {
                     (false, false) => run_tile::<false, false>(&ctx, scratch, &mut band, tx),
                     (false, true) => run_tile::<false, true>(&ctx, scratch, &mut band, tx),
                     (true, false) => run_tile::<true, false>(&ctx, scratch, &mut band, tx),
@@ -547,7 +546,7 @@ fn tile_kernel<const LISTS: bool, const VOTE: bool>(ctx: &Ctx, scratch: &mut Scr
                 continue;
             }
             if VOTE && label != 0 {
-                track_label::<LISTS>(label, mask, &w, st, ly);
+                track_label(label, mask, &w, st, ly);
             }
             if LISTS {
                 // w > 0 exactly where the mask bit is set: a vector compare, not bit extraction.
@@ -642,13 +641,7 @@ fn vote_lanes(label: u32, w: &[f32; T], st: &mut TileState, ly: usize) {
 /// GS Voting for one row visit of a Gaussian with real label `label`: a bit OR and slot 0's
 /// sum while the tile has met one label, the summing slots after (see [`TileLabel`]).
 #[inline(always)]
-fn track_label<const LISTS: bool>(
-    label: u32,
-    mask: u32,
-    w: &[f32; T],
-    st: &mut TileState,
-    ly: usize,
-) {
+fn track_label(label: u32, mask: u32, w: &[f32; T], st: &mut TileState, ly: usize) {
     let tl = &mut st.tile_label;
     if !tl.per_lane {
         if tl.label == 0 {
@@ -656,11 +649,9 @@ fn track_label<const LISTS: bool>(
         }
         if tl.label == label {
             tl.took[ly] |= mask;
-            {
-                // Slot 0's sum, in the order the slot vote would add it (0 where no weight).
-                for (s, &wi) in st.vote_sum[0][ly].iter_mut().zip(w) {
-                    *s += wi;
-                }
+            // Slot 0's sum, in the order the slot vote would add it (0 where no weight).
+            for (s, &wi) in st.vote_sum[0][ly].iter_mut().zip(w) {
+                *s += wi;
             }
             return;
         }

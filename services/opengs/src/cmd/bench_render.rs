@@ -11,7 +11,9 @@ pub struct BenchRenderArgs {
     /// Image sizes, comma-separated WxH (focal 525 at 640 wide, scaled; centred principal point).
     #[arg(long, value_parser = args::parse_size, value_delimiter = ',', default_values = ["640x480", "1200x680"])]
     pub sizes: Vec<(u32, u32)>,
-    /// Timed frames per case (median reported).
+    /// Timed frames per case (median reported). The four requests (colour+depth, +labels+top-K,
+    /// +labels only, +top-K only) render each frame in turn, so the overhead column is the
+    /// median of per-frame ratios and a busy machine slows all columns alike.
     #[arg(long, default_value_t = 9)]
     pub frames: usize,
     /// K of the per-pixel top-K.
