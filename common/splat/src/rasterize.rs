@@ -24,7 +24,7 @@ use crate::bin::TileBins;
 use crate::blend::{alpha_of, gaussian_power, MIN_ALPHA, MIN_TRANSMITTANCE};
 use crate::output::{RenderOutput, RenderRequest};
 use crate::project::Projected;
-use crate::row_log::{PixelLists, RowDst, RowLog, LIST_CAP, STRIDE};
+use crate::row_log::{ListSimd, PixelLists, RowDst, RowLog, LIST_CAP, STRIDE};
 use crate::tiles::{TileGrid, TILE_SIZE};
 use crate::topk::{key_rank, select_top_k, topk_key, weight_positions, TopKBand};
 use crate::voting::vote;
@@ -215,14 +215,14 @@ enum Simd {
 }
 
 impl Simd {
-    fn is_avx512(self) -> bool {
-        #[cfg(target_arch = "x86_64")]
-        {
-            self == Simd::Avx512
-        }
-        #[cfg(not(target_arch = "x86_64"))]
-        {
-            false
+    /// How the top-K lists are read off the row log with these kernels.
+    fn lists(self) -> ListSimd {
+        match self {
+            Simd::Portable => ListSimd::Portable,
+            #[cfg(target_arch = "x86_64")]
+            Simd::Avx2 => ListSimd::Avx2,
+            #[cfg(target_arch = "x86_64")]
+            Simd::Avx512 => ListSimd::Avx512,
         }
     }
 }
@@ -946,7 +946,7 @@ fn build_top_k(
     }
     band.topk_len += total;
 
-    let avx512 = ctx.simd.is_avx512();
+    let simd = ctx.simd.lists();
     let (out_ids, out_ws) = (
         &mut store.ids[at0..at0 + total],
         &mut store.weights[at0..at0 + total],
@@ -982,7 +982,7 @@ fn build_top_k(
             }
         }
         if !log.overflowed(y) {
-            log.write_lists(y, avx512, &mut dst);
+            log.write_lists(y, simd, &mut dst);
         }
     }
 

@@ -2,7 +2,7 @@
 //! a 16-pixel tile row) as one vector of 16 weights (0 where a pixel took nothing) and the
 //! Gaussian's id, in front-to-back order. The lane loop logs with one vector store per visit;
 //! the per-pixel lists (the top-K's input) are read off the log once the tile is done, with
-//! an in-register 16×16 transpose on AVX-512. Appending to 16 per-pixel lists during the
+//! in-register transposes (16×16 on AVX-512, 8×8 on AVX2; a column walk in portable code). Appending to 16 per-pixel lists during the
 //! lane loop instead (16 scattered stores per visit) was the top-K's largest cost.
 
 use crate::tiles::TILE_SIZE;
@@ -38,6 +38,16 @@ pub(crate) const STRIDE: usize = LIST_CAP + 16;
 
 /// Per-pixel contribution lists of one tile row, `[pixel][entry]`.
 pub(crate) type PixelLists<V> = [[V; STRIDE]; T];
+
+/// Which instructions read the lists off the log.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum ListSimd {
+    Portable,
+    #[cfg(target_arch = "x86_64")]
+    Avx2,
+    #[cfg(target_arch = "x86_64")]
+    Avx512,
+}
 
 /// Where the lists of one tile row go: pixel x's `n[x]` entries go nowhere if bit x of
 /// `skip` is set (the caller replays it), to `scratch_*[x]` if bit x of `to_scratch` is set
@@ -91,28 +101,49 @@ impl RowLog {
     /// Writes each pixel's (id, weight) list of row `y`, front to back, where `dst` says.
     /// The row must not have overflowed; `dst.n` must be the pixels' contribution counts.
     #[inline(always)]
-    pub fn write_lists(&self, y: usize, avx512: bool, dst: &mut RowDst) {
+    pub fn write_lists(&self, y: usize, simd: ListSimd, dst: &mut RowDst) {
         debug_assert!(!self.overflowed[y]);
         #[cfg(target_arch = "x86_64")]
-        if avx512 {
-            // SAFETY: the caller passes avx512 only after detecting AVX-512 F on this CPU.
+        if simd == ListSimd::Avx512 {
+            // SAFETY: the caller passes Avx512 only after detecting AVX-512 F on this CPU.
             unsafe { self.write_lists_avx512(y, dst) };
             return;
         }
-        let _ = avx512;
-        let (w, g) = (&self.w[y][..self.n[y]], &self.g[y][..self.n[y]]);
         // Pixels whose list fits the scratch: walked there (then copied out if bound for the
         // output). Others go straight to the output, or nowhere if skipped.
         let mut fits = 0u32;
         for x in 0..T {
             fits |= ((dst.n[x] <= LIST_CAP && (dst.skip >> x) & 1 == 0) as u32) << x;
         }
+        match simd {
+            #[cfg(target_arch = "x86_64")]
+            ListSimd::Avx2 => {
+                // SAFETY: the caller passes Avx2 only after detecting AVX2 on this CPU.
+                unsafe { self.walk_columns_avx2(y, fits, dst) };
+                // Lists longer than the scratch (whole top-Ks, when K > LIST_CAP).
+                self.walk_columns_one_by_one(y, !fits & ((1 << T) - 1), 0, dst);
+            }
+            _ => self.walk_columns(y, fits, dst),
+        }
+        for x in 0..T {
+            if (fits >> x) & 1 != 0 && (dst.to_scratch >> x) & 1 == 0 {
+                let (off, n) = (dst.off[x], dst.n[x]);
+                dst.out_ids[off..off + n].copy_from_slice(&dst.scratch_ids[x][..n]);
+                dst.out_ws[off..off + n].copy_from_slice(&dst.scratch_ws[x][..n]);
+            }
+        }
+    }
+
+    /// Walks row `y`'s pixel columns into the scratch lists (`fits`) or the output.
+    fn walk_columns(&self, y: usize, fits: u32, dst: &mut RowDst) {
+        let (w, g) = (&self.w[y][..self.n[y]], &self.g[y][..self.n[y]]);
         // Branch-free walks down the pixels' columns, four at a time (independent chains):
         // every visit is written, only contributions advance (len ≤ n ≤ LIST_CAP < STRIDE).
         const J: usize = 4;
         for x0 in (0..T).step_by(J) {
-            if (fits >> x0) & ((1 << J) - 1) != (1 << J) - 1 {
-                self.walk_columns_one_by_one(y, x0..x0 + J, fits, dst);
+            let block = ((1u32 << J) - 1) << x0;
+            if fits & block != block {
+                self.walk_columns_one_by_one(y, block, fits, dst);
                 continue;
             }
             let mut len = [0usize; J];
@@ -125,27 +156,14 @@ impl RowLog {
                 }
             }
         }
-        for x in 0..T {
-            if (fits >> x) & 1 != 0 && (dst.to_scratch >> x) & 1 == 0 {
-                let (off, n) = (dst.off[x], dst.n[x]);
-                dst.out_ids[off..off + n].copy_from_slice(&dst.scratch_ids[x][..n]);
-                dst.out_ws[off..off + n].copy_from_slice(&dst.scratch_ws[x][..n]);
-            }
-        }
     }
 
-    /// The walk of [`RowLog::write_lists`] for pixels `xs`, one at a time: into the scratch if
-    /// the list `fits`, else straight into the output unless skipped.
+    /// The walk of [`RowLog::write_lists`] for the pixels in bit mask `xs`, one at a time:
+    /// into the scratch if the list `fits`, else straight into the output unless skipped.
     #[inline(never)]
-    fn walk_columns_one_by_one(
-        &self,
-        y: usize,
-        xs: std::ops::Range<usize>,
-        fits: u32,
-        dst: &mut RowDst,
-    ) {
+    fn walk_columns_one_by_one(&self, y: usize, xs: u32, fits: u32, dst: &mut RowDst) {
         let (w, g) = (&self.w[y][..self.n[y]], &self.g[y][..self.n[y]]);
-        for x in xs {
+        for x in (0..T).filter(|&x| (xs >> x) & 1 != 0) {
             let mut len = 0usize;
             if (fits >> x) & 1 != 0 {
                 for (wv, &gv) in w.iter().zip(g) {
@@ -161,6 +179,59 @@ impl RowLog {
                         dst.out_ws[off + len] = wv[x];
                         len += 1;
                     }
+                }
+            }
+        }
+    }
+
+    /// The column walk for the pixels that `fits`, on AVX2: blocks of 8 visits × 8 pixels
+    /// are transposed in registers, and each pixel's contributions are packed to the front
+    /// by a permutation from a table (AVX2 has no compress) and stored as a whole vector into
+    /// its scratch list (the room past LIST_CAP takes the overhang).
+    ///
+    /// # Safety
+    /// The caller must ensure the CPU supports AVX2.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    unsafe fn walk_columns_avx2(&self, y: usize, fits: u32, dst: &mut RowDst) {
+        use std::arch::x86_64::*;
+        let n = self.n[y];
+        let zero = _mm256_setzero_ps();
+        let scratch_ids = dst.scratch_ids.as_mut_ptr().cast::<u32>();
+        let scratch_ws = dst.scratch_ws.as_mut_ptr().cast::<f32>();
+        let mut len = [0usize; T];
+        for b in (0..n).step_by(8) {
+            // ROW_CAP is a multiple of 8: the block's 8 ids are in bounds.
+            let ids = _mm256_loadu_si256(self.g[y][b..b + 8].as_ptr().cast());
+            for h in 0..2 {
+                if (fits >> (8 * h)) & 0xFF == 0 {
+                    continue;
+                }
+                let mut rows = [zero; 8];
+                for (v, row) in rows.iter_mut().enumerate().take(n - b) {
+                    // SAFETY: 8 of the visit's 16 weights, from 8·h.
+                    *row = unsafe { _mm256_loadu_ps(self.w[y][b + v][8 * h..].as_ptr()) };
+                }
+                let columns = transpose8(rows);
+                for (j, col) in columns.iter().enumerate() {
+                    let x = 8 * h + j;
+                    if (fits >> x) & 1 == 0 {
+                        continue;
+                    }
+                    let m = _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_GT_OQ>(*col, zero)) as usize;
+                    let perm = _mm256_loadu_si256(PACK8[m].as_ptr().cast());
+                    // Memory safety does not rest on the counts matching the log.
+                    assert!(len[x] + 8 <= STRIDE);
+                    let at = x * STRIDE + len[x];
+                    // SAFETY: 8 elements at `at` stay inside pixel x's STRIDE (checked).
+                    unsafe {
+                        _mm256_storeu_ps(scratch_ws.add(at), _mm256_permutevar8x32_ps(*col, perm));
+                        _mm256_storeu_si256(
+                            scratch_ids.add(at).cast(),
+                            _mm256_permutevar8x32_epi32(ids, perm),
+                        );
+                    }
+                    len[x] += m.count_ones() as usize;
                 }
             }
         }
@@ -238,6 +309,64 @@ impl RowLog {
     }
 }
 
+/// For each 8-bit mask, the lanes of its set bits in order (the rest 0): a permutation that
+/// packs those lanes to the front.
+#[cfg(target_arch = "x86_64")]
+static PACK8: [[u32; 8]; 256] = {
+    let mut t = [[0u32; 8]; 256];
+    let mut m = 0;
+    while m < 256 {
+        let (mut i, mut j) = (0, 0);
+        while i < 8 {
+            if (m >> i) & 1 == 1 {
+                t[m][j] = i as u32;
+                j += 1;
+            }
+            i += 1;
+        }
+        m += 1;
+    }
+    t
+};
+
+/// Transposes an 8×8 block of f32 (row v, lane x → row x, lane v).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[inline]
+fn transpose8(r: [std::arch::x86_64::__m256; 8]) -> [std::arch::x86_64::__m256; 8] {
+    use std::arch::x86_64::*;
+    let t = [
+        _mm256_unpacklo_ps(r[0], r[1]),
+        _mm256_unpackhi_ps(r[0], r[1]),
+        _mm256_unpacklo_ps(r[2], r[3]),
+        _mm256_unpackhi_ps(r[2], r[3]),
+        _mm256_unpacklo_ps(r[4], r[5]),
+        _mm256_unpackhi_ps(r[4], r[5]),
+        _mm256_unpacklo_ps(r[6], r[7]),
+        _mm256_unpackhi_ps(r[6], r[7]),
+    ];
+    let u = [
+        _mm256_shuffle_ps::<0x44>(t[0], t[2]),
+        _mm256_shuffle_ps::<0xEE>(t[0], t[2]),
+        _mm256_shuffle_ps::<0x44>(t[1], t[3]),
+        _mm256_shuffle_ps::<0xEE>(t[1], t[3]),
+        _mm256_shuffle_ps::<0x44>(t[4], t[6]),
+        _mm256_shuffle_ps::<0xEE>(t[4], t[6]),
+        _mm256_shuffle_ps::<0x44>(t[5], t[7]),
+        _mm256_shuffle_ps::<0xEE>(t[5], t[7]),
+    ];
+    [
+        _mm256_permute2f128_ps::<0x20>(u[0], u[4]),
+        _mm256_permute2f128_ps::<0x20>(u[1], u[5]),
+        _mm256_permute2f128_ps::<0x20>(u[2], u[6]),
+        _mm256_permute2f128_ps::<0x20>(u[3], u[7]),
+        _mm256_permute2f128_ps::<0x31>(u[0], u[4]),
+        _mm256_permute2f128_ps::<0x31>(u[1], u[5]),
+        _mm256_permute2f128_ps::<0x31>(u[2], u[6]),
+        _mm256_permute2f128_ps::<0x31>(u[3], u[7]),
+    ]
+}
+
 /// Transposes a 16×16 block of f32 (row v, lane x → row x, lane v): 32-bit then 64-bit
 /// interleaves within 128-bit lanes, then two rounds of 128-bit lane shuffles.
 #[cfg(target_arch = "x86_64")]
@@ -287,7 +416,7 @@ mod tests {
     /// if bit x of `skip` is, else to the output.
     fn lists(
         visits: usize,
-        avx512: bool,
+        simd: ListSimd,
         to_scratch: u32,
         skip: u32,
     ) -> Vec<Option<Vec<(u32, f32)>>> {
@@ -323,7 +452,7 @@ mod tests {
             to_scratch,
             skip,
         };
-        log.write_lists(5, avx512, &mut dst);
+        log.write_lists(5, simd, &mut dst);
         (0..T)
             .map(|x| {
                 let (ids, ws) = if (skip >> x) & 1 != 0 {
@@ -341,16 +470,34 @@ mod tests {
             .collect()
     }
 
+    /// The list readers this CPU can run.
+    fn simds_here() -> Vec<ListSimd> {
+        #[allow(unused_mut)]
+        let mut v = vec![ListSimd::Portable];
+        #[cfg(target_arch = "x86_64")]
+        {
+            if std::arch::is_x86_feature_detected!("avx2") {
+                v.push(ListSimd::Avx2);
+            }
+            if std::arch::is_x86_feature_detected!("avx512f") {
+                v.push(ListSimd::Avx512);
+            }
+        }
+        v
+    }
+
     #[test]
     fn lists_are_each_pixels_visits_front_to_back() {
-        // 37 visits: two whole 16-visit blocks and a partial one; odd pixels to the scratch.
-        let got = lists(37, false, 0xAAAA, 0);
-        for (x, list) in got.iter().enumerate() {
-            let want: Vec<(u32, f32)> = (0..37)
-                .filter(|v| !(v + x).is_multiple_of(3))
-                .map(|v| (1000 + v as u32, (v * T + x + 1) as f32))
-                .collect();
-            assert_eq!(list.as_ref(), Some(&want), "pixel {x}");
+        // 37 visits: whole 8- and 16-visit blocks and a partial one; odd pixels to the scratch.
+        for simd in simds_here() {
+            let got = lists(37, simd, 0xAAAA, 0);
+            for (x, list) in got.iter().enumerate() {
+                let want: Vec<(u32, f32)> = (0..37)
+                    .filter(|v| !(v + x).is_multiple_of(3))
+                    .map(|v| (1000 + v as u32, (v * T + x + 1) as f32))
+                    .collect();
+                assert_eq!(list.as_ref(), Some(&want), "{simd:?} pixel {x}");
+            }
         }
     }
 
@@ -359,10 +506,10 @@ mod tests {
         // A full log: every pixel has ~683 contributions; pixels 0–3 and 9 go to the output,
         // the rest are skipped (they would not fit the scratch lists).
         let skip = !0x20F & 0xFFFF;
-        for avx512 in [false, avx512_here()] {
-            let got = lists(ROW_CAP, avx512, 0, skip);
+        for simd in simds_here() {
+            let got = lists(ROW_CAP, simd, 0, skip);
             for (x, list) in got.iter().enumerate() {
-                assert_eq!(list.is_none(), (skip >> x) & 1 != 0, "pixel {x}");
+                assert_eq!(list.is_none(), (skip >> x) & 1 != 0, "{simd:?} pixel {x}");
                 if let Some(list) = list {
                     assert!(list.len() > LIST_CAP);
                     assert!(list.iter().zip(&list[1..]).all(|(a, b)| a.0 < b.0));
@@ -371,26 +518,15 @@ mod tests {
         }
     }
 
-    fn avx512_here() -> bool {
-        #[cfg(target_arch = "x86_64")]
-        {
-            std::arch::is_x86_feature_detected!("avx512f")
-        }
-        #[cfg(not(target_arch = "x86_64"))]
-        {
-            false
-        }
-    }
-
     #[test]
-    fn avx512_lists_match_portable() {
-        if avx512_here() {
-            for visits in [1, 16, 37, 200] {
-                for (to_scratch, skip) in [(0xAAAA, 0), (0x00F0, 0x0F00)] {
+    fn simd_lists_match_portable() {
+        for simd in simds_here() {
+            for visits in [1, 8, 16, 37, 200] {
+                for (to_scratch, skip) in [(0xAAAA, 0), (0x00F0, 0x0F00), (0, 0)] {
                     assert_eq!(
-                        lists(visits, true, to_scratch, skip),
-                        lists(visits, false, to_scratch, skip),
-                        "{visits} visits"
+                        lists(visits, simd, to_scratch, skip),
+                        lists(visits, ListSimd::Portable, to_scratch, skip),
+                        "{simd:?}, {visits} visits"
                     );
                 }
             }
