@@ -17,7 +17,7 @@ use opengs_semantics::{
     apply_relabels, select_counter_gaussians, validate_regions, CounterPruneRegion,
     RelabelInstruction,
 };
-use opengs_splat::{render, Camera, RenderRequest};
+use opengs_splat::{render_into, Camera, RenderRequest};
 
 use crate::mapper::Mapper;
 use crate::pixel_top_k::PixelTopK;
@@ -134,9 +134,10 @@ impl Mapper {
     /// GS Voting render with top-K (K = `k`) and per-label visibility at `camera` (full
     /// resolution); kept for [`Mapper::apply_consensus`] of keyframe `seq`.
     pub fn render_for_consensus(&mut self, seq: u64, camera: &Camera, k: usize) -> &KeyframeRender {
-        let r = render(&self.map, camera, &RenderRequest::semantic(k));
-        let out = r.output;
-        let label_map = out.labels.unwrap_or_default();
+        let r = &mut self.semantic_buffers;
+        render_into(&self.map, camera, &RenderRequest::semantic(k), r);
+        let out = &mut r.output;
+        let label_map = out.labels.take().unwrap_or_default();
         let surface_depth = out
             .depth
             .iter()
@@ -145,10 +146,10 @@ impl Mapper {
             .collect();
         let top_k = out
             .top_k
-            .as_ref()
+            .take()
             .map(PixelTopK::from_render)
             .unwrap_or_default();
-        let visible = out.visible_per_label.unwrap_or_default();
+        let visible = out.visible_per_label.take().unwrap_or_default();
         let visibility = label_visibility(&self.map.count_per_label(), &visible);
         self.pending.push(KeyframeRender {
             seq,
@@ -216,6 +217,11 @@ impl Mapper {
             let old_to_new = self.map.remove_where(&remove);
             self.adam.compact(&old_to_new);
             self.pending.remap(&old_to_new);
+        }
+        // Its top-K buffers serve the next semantic render.
+        let spare = &mut self.semantic_buffers.output.top_k;
+        if spare.is_none() {
+            *spare = Some(render.top_k.into_render());
         }
         Ok(ConsensusApplied {
             relabelled,

@@ -174,3 +174,33 @@ fn pending_top_k_follows_a_compaction() {
     assert_eq!(done.relabelled, 1);
     assert_eq!(&m.map().labels, &[6, 0, 0]);
 }
+
+#[test]
+fn the_next_keyframe_render_reuses_the_buffers_and_sees_the_relabel() {
+    let mut m = mapper();
+    let labels = vec![0u32; (W * W) as usize];
+    m.render_for_consensus(7, &camera(), 50);
+    let first = [RelabelInstruction {
+        from: 5,
+        to: 8,
+        pixels: vec![px(22, 32)],
+    }];
+    m.apply_consensus(&update(&labels, &first, &[])).unwrap();
+    // Keyframe 8 renders into the buffers (top-K included) that keyframe 7's consensus gave back.
+    let r = m.render_for_consensus(8, &camera(), 50);
+    assert_eq!(r.label_map[px(22, 32) as usize], 8);
+    assert_eq!(r.label_map[px(42, 32) as usize], 5);
+    let second = [RelabelInstruction {
+        from: 5,
+        to: 9,
+        pixels: vec![px(42, 32)],
+    }];
+    let done = m
+        .apply_consensus(&ConsensusUpdate {
+            seq: 8,
+            ..update(&labels, &second, &[])
+        })
+        .unwrap();
+    assert_eq!(done.relabelled, 1);
+    assert_eq!(&m.map().labels, &[8, 9, 0, 0]);
+}
