@@ -47,13 +47,18 @@ impl PixelTopK {
         self.top_k
     }
 
+    /// Pixels per 16-row band: pixel p's lists are in band p / this.
+    fn pixels_per_band(&self) -> usize {
+        TILE_SIZE as usize * self.top_k.width as usize
+    }
+
     /// Pixel `pixel`'s (ids, weights) (row-major index; empty when out of range).
     fn lists_at(&self, pixel: usize) -> (&[u32], &[f32]) {
         let t = &self.top_k;
         let (Some(&s), Some(&n)) = (t.start.get(pixel), t.count.get(pixel)) else {
             return (&[], &[]);
         };
-        let band = &t.bands[pixel / t.width as usize / TILE_SIZE as usize];
+        let band = &t.bands[pixel / self.pixels_per_band()];
         let (s, n) = (s as usize, n as usize);
         (&band.ids[s..s + n], &band.weights[s..s + n])
     }
@@ -73,10 +78,10 @@ impl PixelTopK {
     /// Rewrites ids after the map was compacted (`old_to_new` from `GaussianMap::remove_where`);
     /// removed Gaussians drop out of every list (each list shrinks in place).
     pub fn remap(&mut self, old_to_new: &[Option<u32>]) {
+        let pixels_per_band = self.pixels_per_band();
         let t = &mut self.top_k;
-        let rows_per_band = TILE_SIZE as usize * t.width as usize;
         for (p, (&s, count)) in t.start.iter().zip(t.count.iter_mut()).enumerate() {
-            let band = &mut t.bands[p / rows_per_band];
+            let band = &mut t.bands[p / pixels_per_band];
             let (s, n) = (s as usize, *count as usize);
             let mut write = s;
             for read in s..s + n {

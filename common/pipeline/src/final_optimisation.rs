@@ -99,8 +99,8 @@ impl KeptKeyframes {
     }
 }
 
-/// Runs `steps` full-resolution steps on the kept keyframes. `progress(done)` is called after
-/// every step; `ControlFlow::Break` (a termination request) stops early, keeping the map as
+/// Runs `steps` full-resolution steps on the kept keyframes. `progress(done, loss)` is called
+/// after every step; `ControlFlow::Break` (a termination request) stops early, keeping the map as
 /// it is then. Returns `None` when there is nothing to optimise.
 pub fn optimise_final(
     map: &mut GaussianMap,

@@ -436,7 +436,7 @@ pub fn run_mapper(ctx: &RunContext, out_dir: &Path, args: &MapperArgs) -> anyhow
     } = stage;
     let mut map = mapper.into_map();
     let mut finish_stats = None;
-    if let (true, Some(kept)) = (finishing, kept) {
+    if let Some(kept) = kept.filter(|_| finishing) {
         let steps = args.finish_steps;
         tracing::info!(
             "end of data: final optimisation, {steps} full-resolution steps on {} keyframes",
@@ -487,7 +487,8 @@ pub fn run_mapper(ctx: &RunContext, out_dir: &Path, args: &MapperArgs) -> anyhow
                 .join()
                 .map_err(|_| anyhow::anyhow!("the final optimisation panicked"))?
         })?;
-        telemetry.progress(steps as u32, steps as u32);
+        let done = finish_stats.as_ref().map_or(0, |s| s.iterations);
+        telemetry.progress(done as u32, steps as u32);
     }
     let seconds = started.elapsed().as_secs_f64();
     if !map.is_empty() {

@@ -100,7 +100,7 @@ impl Supervisor {
         })?;
         let started = Instant::now();
         let mut state = RunState::new(&opts);
-        let mut streaming_s = 0.0;
+        let mut streaming_s = None;
         // IPC objects live in this scope so they are gone before the leftover check.
         let ending = {
             let node = ctx.node("supervisor")?;
@@ -114,7 +114,7 @@ impl Supervisor {
                 .start_all(&ch)
                 .and_then(|()| state.main_loop(&ctx, &ch, started))
                 .and_then(|ending| {
-                    streaming_s = started.elapsed().as_secs_f64();
+                    streaming_s = Some(started.elapsed().as_secs_f64());
                     match ending {
                         Ending::EndOfData if opts.finish_after_data => state.finish_stages(&ch),
                         other => Ok(other),
@@ -177,11 +177,7 @@ impl Supervisor {
             keyframes: state.recorder.keyframes(),
             tracking_failures: state.recorder.failures(),
             elapsed_s: started.elapsed().as_secs_f64(),
-            streaming_s: if streaming_s > 0.0 {
-                streaming_s
-            } else {
-                started.elapsed().as_secs_f64()
-            },
+            streaming_s: streaming_s.unwrap_or_else(|| started.elapsed().as_secs_f64()),
             latency,
             restarts: state
                 .stages

@@ -24,7 +24,7 @@ use crate::bin::TileBins;
 use crate::blend::{alpha_of, gaussian_power, MIN_ALPHA, MIN_TRANSMITTANCE};
 use crate::output::{RenderOutput, RenderRequest};
 use crate::project::Projected;
-use crate::row_log::{ListSimd, PixelLists, RowDst, RowLog, LIST_CAP, STRIDE};
+use crate::row_log::{boxed_rows, ListSimd, PixelLists, RowDst, RowLog, LIST_CAP, STRIDE};
 use crate::tiles::{TileGrid, TILE_SIZE};
 use crate::topk::{key_rank, select_top_k, topk_key, weight_positions, TopKBand};
 use crate::voting::vote;
@@ -343,15 +343,6 @@ thread_local! {
     static SCRATCH: RefCell<Option<Scratch>> = const { RefCell::new(None) };
 }
 
-/// A zeroed boxed value built on the heap (the slot arrays are too big for the stack).
-fn boxed_zeroed<V: Copy + Default>() -> Box<Slots<V>> {
-    let v: Vec<[[V; STRIDE]; T]> = vec![[[V::default(); STRIDE]; T]; T];
-    match v.into_boxed_slice().try_into() {
-        Ok(b) => b,
-        Err(_) => unreachable!("the vector has T elements"),
-    }
-}
-
 impl Scratch {
     fn new() -> Self {
         Self {
@@ -375,8 +366,8 @@ impl Scratch {
                 },
             }),
             log: RowLog::new(),
-            ids: boxed_zeroed::<u32>(),
-            ws: boxed_zeroed::<f32>(),
+            ids: boxed_rows([[0; STRIDE]; T]),
+            ws: boxed_rows([[0.0; STRIDE]; T]),
             keys: Vec::new(),
             votes: Vec::new(),
             replay: Vec::new(),

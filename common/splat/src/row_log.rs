@@ -2,8 +2,9 @@
 //! a 16-pixel tile row) as one vector of 16 weights (0 where a pixel took nothing) and the
 //! Gaussian's id, in front-to-back order. The lane loop logs with one vector store per visit;
 //! the per-pixel lists (the top-K's input) are read off the log once the tile is done, with
-//! in-register transposes (16×16 on AVX-512, 8×8 on AVX2; a column walk in portable code). Appending to 16 per-pixel lists during the
-//! lane loop instead (16 scattered stores per visit) was the top-K's largest cost.
+//! in-register transposes (16×16 on AVX-512, 8×8 on AVX2; a column walk in portable code).
+//! Appending to 16 per-pixel lists during the lane loop instead (16 scattered stores per
+//! visit) was the top-K's largest cost.
 
 use crate::tiles::TILE_SIZE;
 
@@ -25,8 +26,9 @@ pub(crate) struct RowLog {
     overflowed: [bool; T],
 }
 
-/// A boxed `[a; T]` built on the heap (the log's rows are too big for the stack).
-fn boxed_rows<A: Copy>(a: A) -> Box<[A; T]> {
+/// A boxed `[a; T]` built on the heap (a tile's rows of log or lists are too big for the
+/// stack).
+pub(crate) fn boxed_rows<A: Copy>(a: A) -> Box<[A; T]> {
     match vec![a; T].into_boxed_slice().try_into() {
         Ok(b) => b,
         Err(_) => unreachable!("the vector has T elements"),
