@@ -31,6 +31,7 @@ mod rasterize;
 mod reference;
 mod render;
 mod row_log;
+mod row_votes;
 pub mod scene;
 mod ssim;
 mod target;

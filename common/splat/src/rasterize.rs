@@ -7,10 +7,10 @@
 //! bit-identical). For top-K every row visit is logged (one vector of 16 weights, see
 //! `row_log`); at the end of the tile the per-pixel lists are read off the log straight into
 //! the output where a pixel's list fits in K (the usual case), else into scratch lists whose
-//! K heaviest are selected; sorted only on request. Voting needs no sums while a tile's
-//! contributions carry one real label (a bit per pixel, and slot 0's sum); from a second
-//! label on, 3 (label, sum) slots per pixel in the lane loop (pixels meeting more labels
-//! are voted exactly at the end of the tile, from their list or a replay).
+//! K heaviest are kept (a quickselect on lane bit masks, see `topk::keep_heaviest`); sorted
+//! only on request. Voting keeps, per tile row, the few labels the row met and a 16-lane sum
+//! per label (`row_votes`): one vector add per row visit; rows meeting more labels are voted
+//! exactly at the end of the tile, from their pixels' lists or a replay.
 //! Bands of 16 image rows run in parallel (rayon) with per-thread scratch kept across
 //! frames; one kernel is compiled per combination of requested outputs and per SIMD level.
 
@@ -25,8 +25,9 @@ use crate::blend::{alpha_of, gaussian_power, MIN_ALPHA, MIN_TRANSMITTANCE};
 use crate::output::{RenderOutput, RenderRequest};
 use crate::project::Projected;
 use crate::row_log::{boxed_rows, ListSimd, PixelLists, RowDst, RowLog, LIST_CAP, STRIDE};
+use crate::row_votes::RowVotes;
 use crate::tiles::{TileGrid, TILE_SIZE};
-use crate::topk::{key_rank, select_top_k, topk_key, weight_positions, TopKBand};
+use crate::topk::{keep_heaviest, key_rank, select_top_k, topk_key, weight_positions, TopKBand};
 use crate::voting::vote;
 
 const T: usize = TILE_SIZE as usize;
@@ -248,10 +249,13 @@ fn simd_level() -> Simd {
         if std::arch::is_x86_feature_detected!("avx512f")
             && std::arch::is_x86_feature_detected!("avx512bw")
             && std::arch::is_x86_feature_detected!("avx512vl")
+            && std::arch::is_x86_feature_detected!("popcnt")
         {
             return Simd::Avx512;
         }
-        if std::arch::is_x86_feature_detected!("avx2") {
+        if std::arch::is_x86_feature_detected!("avx2")
+            && std::arch::is_x86_feature_detected!("popcnt")
+        {
             return Simd::Avx2;
         }
     }
@@ -298,30 +302,9 @@ struct TileState {
     row_live: [u32; T],
     /// Contributions per pixel so far (lists mode).
     count: [[u32; T]; T],
-    /// GS Voting from a tile's second label on: VOTE_SLOTS (label, weight sum) slots per
-    /// pixel, filled in order; a pixel meeting more labels is flagged and voted exactly at
-    /// the end.
-    vote_label: [[[u32; T]; T]; VOTE_SLOTS],
-    vote_sum: [[[f32; T]; T]; VOTE_SLOTS],
-    vote_overflow: [[u32; T]; T],
-    /// The one real label the tile's contributions had so far (0: none yet), and per row
-    /// the pixels that took it; per-lane voting starts at a second label.
-    tile_label: TileLabel,
+    /// GS Voting sums, per tile row.
+    votes: RowVotes,
 }
-
-/// GS Voting per tile: while every contribution so far has one real label, a pixel's vote is
-/// that label if it took any of it, 0 otherwise (a bit per pixel); once a second label
-/// contributes, the summing slots take over, slot 0 starting with the first label and the
-/// sum kept for it all along.
-#[derive(Clone, Copy)]
-struct TileLabel {
-    label: u32,
-    took: [u32; T],
-    per_lane: bool,
-}
-
-/// Label slots per pixel held in vector registers (few labels meet at a pixel).
-const VOTE_SLOTS: usize = 3;
 
 /// Per-pixel contribution lists of one tile, `[row][lane][slot]`, for the pixels whose top-K
 /// is not their whole list front to back (longer than K, or sorted on request).
@@ -356,14 +339,7 @@ impl Scratch {
                 last: [[0; T]; T],
                 row_live: [0; T],
                 count: [[0; T]; T],
-                vote_label: [[[0; T]; T]; VOTE_SLOTS],
-                vote_sum: [[[0.0; T]; T]; VOTE_SLOTS],
-                vote_overflow: [[0; T]; T],
-                tile_label: TileLabel {
-                    label: 0,
-                    took: [0; T],
-                    per_lane: false,
-                },
+                votes: RowVotes::new(),
             }),
             log: RowLog::new(),
             ids: boxed_rows([[0; STRIDE]; T]),
@@ -395,10 +371,10 @@ fn run_tile<const LISTS: bool, const VOTE: bool>(
 ) {
     match ctx.simd {
         #[cfg(target_arch = "x86_64")]
-        // SAFETY: `simd_level` chose Avx512 only after detecting avx512f/bw/vl on this CPU.
+        // SAFETY: `simd_level` chose Avx512 only after detecting avx512f/bw/vl and popcnt on this CPU.
         Simd::Avx512 => unsafe { tile_avx512::<LISTS, VOTE>(ctx, scratch, band, tx) },
         #[cfg(target_arch = "x86_64")]
-        // SAFETY: `simd_level` chose Avx2 only after detecting avx2 on this CPU.
+        // SAFETY: `simd_level` chose Avx2 only after detecting avx2 and popcnt on this CPU.
         Simd::Avx2 => unsafe { tile_avx2::<LISTS, VOTE>(ctx, scratch, band, tx) },
         Simd::Portable => tile::<LISTS, VOTE>(ctx, scratch, band, tx),
     }
@@ -408,9 +384,9 @@ fn run_tile<const LISTS: bool, const VOTE: bool>(
 /// enabled, so results are bit-identical to the portable build and the reference renderer.
 ///
 /// # Safety
-/// The caller must ensure the CPU supports AVX-512 F, BW and VL.
+/// The caller must ensure the CPU supports AVX-512 F, BW and VL, and POPCNT.
 #[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx512f,avx512bw,avx512vl,avx2")]
+#[target_feature(enable = "avx512f,avx512bw,avx512vl,avx2,popcnt")]
 unsafe fn tile_avx512<const LISTS: bool, const VOTE: bool>(
     ctx: &Ctx,
     scratch: &mut Scratch,
@@ -423,9 +399,9 @@ unsafe fn tile_avx512<const LISTS: bool, const VOTE: bool>(
 /// The tile compiled for AVX2 (bit-identical results: no FMA).
 ///
 /// # Safety
-/// The caller must ensure the CPU supports AVX2.
+/// The caller must ensure the CPU supports AVX2 and POPCNT.
 #[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
+#[target_feature(enable = "avx2,popcnt")]
 unsafe fn tile_avx2<const LISTS: bool, const VOTE: bool>(
     ctx: &Ctx,
     scratch: &mut Scratch,
@@ -471,14 +447,7 @@ fn tile_kernel<const LISTS: bool, const VOTE: bool>(ctx: &Ctx, scratch: &mut Scr
         scratch.log.clear();
     }
     if VOTE {
-        st.tile_label = TileLabel {
-            label: 0,
-            took: [0; T],
-            per_lane: false,
-        };
-        st.vote_label = [[[0; T]; T]; VOTE_SLOTS];
-        st.vote_sum = [[[0.0; T]; T]; VOTE_SLOTS];
-        st.vote_overflow = [[0; T]; T];
+        st.votes.clear();
     }
     let mut live = (rows * cols) as u32;
     let lane_x: [f32; T] = std::array::from_fn(|i| (tx0 + i as u32) as f32);
@@ -537,7 +506,7 @@ fn tile_kernel<const LISTS: bool, const VOTE: bool>(ctx: &Ctx, scratch: &mut Scr
                 continue;
             }
             if VOTE && label != 0 {
-                track_label(label, mask, &w, st, ly);
+                st.votes.add(ly, label, &w);
             }
             if LISTS {
                 // w > 0 exactly where the mask bit is set: a vector compare, not bit extraction.
@@ -603,58 +572,6 @@ fn blend_row(
         w[i] = wi;
     }
     (mask, newly_done)
-}
-
-/// Adds this Gaussian's weights to its label's slot in every lane (branch-free): the first
-/// slot holding the label or still empty takes it; if none, the pixel is flagged.
-#[inline(always)]
-fn vote_lanes(label: u32, w: &[f32; T], st: &mut TileState, ly: usize) {
-    let mut pending = [true; T];
-    for slot in 0..VOTE_SLOTS {
-        let l = &mut st.vote_label[slot][ly];
-        let s = &mut st.vote_sum[slot][ly];
-        for i in 0..T {
-            let c = w[i] > 0.0;
-            let (same, empty) = (l[i] == label, l[i] == 0);
-            let take = c & pending[i] & (same | empty);
-            // An empty slot's sum is 0, and 0 + w == w exactly.
-            s[i] += if take { w[i] } else { 0.0 };
-            l[i] = if take { label } else { l[i] };
-            pending[i] &= !(same | empty);
-        }
-    }
-    let ov = &mut st.vote_overflow[ly];
-    for i in 0..T {
-        ov[i] |= ((w[i] > 0.0) & pending[i]) as u32;
-    }
-}
-
-/// GS Voting for one row visit of a Gaussian with real label `label`: a bit OR and slot 0's
-/// sum while the tile has met one label, the summing slots after (see [`TileLabel`]).
-#[inline(always)]
-fn track_label(label: u32, mask: u32, w: &[f32; T], st: &mut TileState, ly: usize) {
-    let tl = &mut st.tile_label;
-    if !tl.per_lane {
-        if tl.label == 0 {
-            tl.label = label;
-        }
-        if tl.label == label {
-            tl.took[ly] |= mask;
-            // Slot 0's sum, in the order the slot vote would add it (0 where no weight).
-            for (s, &wi) in st.vote_sum[0][ly].iter_mut().zip(w) {
-                *s += wi;
-            }
-            return;
-        }
-        // A second label: the pixels that took the first start slot 0 with it.
-        tl.per_lane = true;
-        for (y, &took) in tl.took.iter().enumerate() {
-            for x in 0..T {
-                st.vote_label[0][y][x] = if (took >> x) & 1 != 0 { tl.label } else { 0 };
-            }
-        }
-    }
-    vote_lanes(label, w, st, ly);
 }
 
 /// Weights (tile rank, α·T) of one pixel's contributions, front to back: the kernel's
@@ -739,34 +656,25 @@ fn write_tile<const LISTS: bool, const VOTE: bool>(
                 start: band.topk_start.as_deref(),
             };
             for y in 0..rows {
-                for x in 0..cols {
-                    let tl = &st.tile_label;
-                    let resolved = if !tl.per_lane {
-                        Some(if (tl.took[y] >> x) & 1 != 0 {
-                            tl.label
-                        } else {
-                            0
-                        })
-                    } else {
-                        slot_label(st, y, x)
-                    };
+                let row = &mut labels[y * w + x0..][..cols];
+                if !st.votes.overflowed(y) {
+                    row.copy_from_slice(&st.votes.winners(y)[..cols]);
+                    continue;
+                }
+                // More labels than the row tracks: vote over each pixel's list, or its replay.
+                for (x, label) in row.iter_mut().enumerate() {
                     let o = y * w + x0 + x;
-                    let label = match resolved {
-                        Some(l) => l,
-                        // More labels than tracked: vote over the pixel's list, or its replay.
-                        None => match lists.pixel(ctx, y, x, o) {
-                            Some((ids, ws)) => vote_list(ids, ws, ctx.labels, votes),
-                            None => {
-                                let (px, py) = ((x0 + x) as u32, (band.band * T + y) as u32);
-                                replay_pixel(ctx.projected, list, px, py, replay);
-                                let it = replay
-                                    .iter()
-                                    .map(|&(r, wt)| (ctx.labels[list[r as usize] as usize], wt));
-                                vote(it, votes)
-                            }
-                        },
+                    *label = match lists.pixel(ctx, y, x, o) {
+                        Some((ids, ws)) => vote_list(ids, ws, ctx.labels, votes),
+                        None => {
+                            let (px, py) = ((x0 + x) as u32, (band.band * T + y) as u32);
+                            replay_pixel(ctx.projected, list, px, py, replay);
+                            let it = replay
+                                .iter()
+                                .map(|&(r, wt)| (ctx.labels[list[r as usize] as usize], wt));
+                            vote(it, votes)
+                        }
                     };
-                    labels[o] = label;
                 }
             }
         }
@@ -866,22 +774,6 @@ fn vote_list(ids: &[u32], ws: &[f32], labels: &[u32], votes: &mut Vec<(u32, f32)
     best.0
 }
 
-/// The voted label from a pixel's lane slots; `None` when it met more labels than slots.
-#[inline(always)]
-fn slot_label(st: &TileState, y: usize, x: usize) -> Option<u32> {
-    if st.vote_overflow[y][x] != 0 {
-        return None;
-    }
-    let mut best = (0u32, 0.0f32);
-    for slot in 0..VOTE_SLOTS {
-        let (l, s) = (st.vote_label[slot][y][x], st.vote_sum[slot][y][x]);
-        if l != 0 && (best.0 == 0 || s > best.1 || (s == best.1 && l < best.0)) {
-            best = (l, s);
-        }
-    }
-    Some(best.0)
-}
-
 /// Writes the tile's top-K into the band store: each pixel's region (K or fewer entries, in
 /// pixel order) is laid out from the counts, then the row logs are read off into the regions
 /// directly where the top-K is the whole list front to back (the usual case), else into
@@ -920,12 +812,13 @@ fn build_top_k(
     } = scratch;
     let at0 = band.topk_len;
     let mut total = 0usize;
-    for y in 0..rows {
-        for x in 0..cols {
-            let o = y * w + x0 + x;
-            let m = (st.count[y][x] as usize).min(k);
-            start[o] = (at0 + total) as u32;
-            count[o] = m as u16;
+    for (y, counts) in st.count.iter().enumerate().take(rows) {
+        let o = y * w + x0;
+        let (start, count) = (&mut start[o..o + cols], &mut count[o..o + cols]);
+        for ((s, c), &n) in start.iter_mut().zip(count.iter_mut()).zip(counts) {
+            let m = (n as usize).min(k);
+            *s = (at0 + total) as u32;
+            *c = m as u16;
             total += m;
         }
     }
@@ -938,10 +831,17 @@ fn build_top_k(
     band.topk_len += total;
 
     let simd = ctx.simd.lists();
+    #[cfg(target_arch = "x86_64")]
+    let avx512 = ctx.simd == Simd::Avx512;
+    #[cfg(not(target_arch = "x86_64"))]
+    let avx512 = false;
     let (out_ids, out_ws) = (
         &mut store.ids[at0..at0 + total],
         &mut store.weights[at0..at0 + total],
     );
+    // Per row, the pixels whose top-K is not written by the list read-off: chosen from the
+    // scratch lists, or replayed (all pixels with contributions, where the log overflowed).
+    let mut later = [0u32; T];
     let mut off = 0usize;
     for (y, (scratch_ids, scratch_ws)) in scratch_ids
         .iter_mut()
@@ -974,11 +874,19 @@ fn build_top_k(
         }
         if !log.overflowed(y) {
             log.write_lists(y, simd, &mut dst);
+            later[y] = dst.to_scratch | dst.skip;
+        } else {
+            for x in 0..cols {
+                later[y] |= ((dst.n[x] > 0) as u32) << x;
+            }
         }
     }
 
-    for y in 0..rows {
-        for x in 0..cols {
+    for (y, &row) in later.iter().enumerate().take(rows) {
+        let mut xs = row;
+        while xs != 0 {
+            let x = xs.trailing_zeros() as usize;
+            xs &= xs - 1;
             let o = y * w + x0 + x;
             let n = st.count[y][x] as usize;
             let listed = has_list(log, y, n, k, sort);
@@ -1019,20 +927,10 @@ fn build_top_k(
                     }
                 }
             } else if listed && !sort {
-                // Longer than K: the K-th largest key by selection, then one pass keeps the
-                // keys at or above it, front to back (keys are unique).
-                let (ids, ws) = (&scratch_ids[y][x][..n], &scratch_ws[y][x][..n]);
-                keys.clear();
-                keys.extend(ws.iter().enumerate().map(|(i, &wt)| topk_key(wt, i as u32)));
-                let (_, &mut kth, _) = keys.select_nth_unstable_by(m - 1, |a, b| b.cmp(a));
-                let mut j = 0;
-                for (i, (&id, &wt)) in ids.iter().zip(ws).enumerate() {
-                    if topk_key(wt, i as u32) >= kth {
-                        dst_ids[j] = id;
-                        dst_ws[j] = wt;
-                        j += 1;
-                    }
-                }
+                // Longer than K: the K heaviest, front to back.
+                let (ids, ws) = (&scratch_ids[y][x], &mut scratch_ws[y][x]);
+                ws[n..n.div_ceil(64) * 64].fill(0.0);
+                keep_heaviest(ids, ws, n, dst_ids, dst_ws, avx512);
             } else if listed {
                 let (ids, ws) = (&scratch_ids[y][x][..n], &scratch_ws[y][x][..n]);
                 keys.clear();

@@ -107,7 +107,7 @@ impl RowLog {
         debug_assert!(!self.overflowed[y]);
         #[cfg(target_arch = "x86_64")]
         if simd == ListSimd::Avx512 {
-            // SAFETY: the caller passes Avx512 only after detecting AVX-512 F on this CPU.
+            // SAFETY: the caller passes Avx512 only after detecting AVX-512 F and POPCNT on this CPU.
             unsafe { self.write_lists_avx512(y, dst) };
             return;
         }
@@ -243,9 +243,9 @@ impl RowLog {
     /// pixel columns, a compress keeps each pixel's contributions, a masked store appends them.
     ///
     /// # Safety
-    /// The caller must ensure the CPU supports AVX-512 F.
+    /// The caller must ensure the CPU supports AVX-512 F and POPCNT.
     #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx512f")]
+    #[target_feature(enable = "avx512f,popcnt")]
     unsafe fn write_lists_avx512(&self, y: usize, dst: &mut RowDst) {
         use std::arch::x86_64::*;
         // Each pixel's destination as a pointer and the room behind it (checked below).
@@ -481,7 +481,9 @@ mod tests {
             if std::arch::is_x86_feature_detected!("avx2") {
                 v.push(ListSimd::Avx2);
             }
-            if std::arch::is_x86_feature_detected!("avx512f") {
+            if std::arch::is_x86_feature_detected!("avx512f")
+                && std::arch::is_x86_feature_detected!("popcnt")
+            {
                 v.push(ListSimd::Avx512);
             }
         }

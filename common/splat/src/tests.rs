@@ -231,6 +231,11 @@ fn transmittance_saturation_stops_compositing() {
 }
 
 fn random_scene(n: usize, seed: u64) -> GaussianMap {
+    random_scene_with_labels(n, seed, 6)
+}
+
+/// Random scene whose labels are drawn from 0..labels.
+fn random_scene_with_labels(n: usize, seed: u64, labels: u32) -> GaussianMap {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let mut m = GaussianMap::new();
     for _ in 0..n {
@@ -244,7 +249,7 @@ fn random_scene(n: usize, seed: u64) -> GaussianMap {
             scale,
             rng.gen_range(0.002..0.999),
             std::array::from_fn(|_| rng.gen_range(-0.1..1.1)),
-            rng.gen_range(0..6),
+            rng.gen_range(0..labels),
         ));
     }
     m
@@ -499,6 +504,53 @@ fn crowded_rows_match_the_reference() {
     for y in 0..48 {
         for x in 0..64 {
             assert_eq!(tk.pixel(x, y), tp.pixel(x, y), "pixel ({x}, {y})");
+        }
+    }
+}
+
+#[test]
+fn rows_meeting_many_labels_are_voted_exactly() {
+    // Labels from 40 values: many tile rows meet more labels than a row tracks, so their
+    // pixels are voted from their lists (semantic requests) or a replay (labels only).
+    let k = Intrinsics::new(60.0, 62.0, 35.5, 25.0, 72, 52);
+    let pose = crate::scene::look_at([0.1, -0.2, -0.3], [0.0, 0.0, 2.0]);
+    let map = random_scene_with_labels(900, 11, 40);
+    let cam = Camera::from_pose(k, &pose, 0.1);
+    let slow = render_reference(&map, &cam, 8);
+    // How many tile rows meet more real labels than tracked.
+    let rendered = render(&map, &cam, &RenderRequest::color_depth());
+    let mut crowded = 0;
+    for y in 0..k.height {
+        for tx in 0..k.width.div_ceil(16) {
+            let mut met = std::collections::BTreeSet::new();
+            for x in tx * 16..(tx * 16 + 16).min(k.width) {
+                for (id, _) in rendered.pixel_contributions(x, y) {
+                    met.insert(map.labels[id as usize]);
+                }
+            }
+            met.remove(&0);
+            crowded += (met.len() > crate::row_votes::ROW_LABELS) as usize;
+        }
+    }
+    assert!(crowded > 0, "the scene should crowd some rows with labels");
+    let only_labels = RenderRequest {
+        labels: true,
+        ..RenderRequest::default()
+    };
+    for req in [
+        only_labels,
+        RenderRequest::semantic(8),
+        RenderRequest::semantic_sorted(8),
+    ] {
+        for portable in [false, true] {
+            crate::rasterize::force_portable(portable);
+            let o = render(&map, &cam, &req).output;
+            crate::rasterize::force_portable(false);
+            assert_eq!(
+                o.labels.as_ref().expect("asked"),
+                &slow.labels,
+                "{req:?} portable {portable} ({crowded} crowded rows)"
+            );
         }
     }
 }

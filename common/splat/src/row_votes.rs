@@ -1,0 +1,154 @@
+//! GS Voting sums of one tile (METHOD §3), kept per tile row: every Gaussian gives all the
+//! pixels of a row visit one label, so a row keeps a short table of the labels it met and,
+//! per label, a 16-lane vector of summed weights (0 where a pixel never took that label). A
+//! visit is one table lookup and one vector add; the winner per pixel is a few vector
+//! compares at the end of the tile. Rows meeting more labels than the table holds are marked
+//! and their pixels voted exactly by the caller (from their lists, or a replay).
+
+use crate::tiles::TILE_SIZE;
+
+const T: usize = TILE_SIZE as usize;
+
+/// Labels a tile row can track (rows at object borders meet a few).
+pub(crate) const ROW_LABELS: usize = 8;
+
+pub(crate) struct RowVotes {
+    /// `[row][slot]`: the labels met on the row, in order of first contribution.
+    label: [[u32; ROW_LABELS]; T],
+    used: [usize; T],
+    /// `[row][slot][pixel]`: summed weight of the slot's label at the pixel.
+    sum: [[[f32; T]; ROW_LABELS]; T],
+    /// Bit y: row y met more than ROW_LABELS labels.
+    overflow: u32,
+}
+
+impl RowVotes {
+    pub fn new() -> Self {
+        Self {
+            label: [[0; ROW_LABELS]; T],
+            used: [0; T],
+            sum: [[[0.0; T]; ROW_LABELS]; T],
+            overflow: 0,
+        }
+    }
+
+    /// Forgets the last tile (sums are reset as their slot is taken).
+    #[inline(always)]
+    pub fn clear(&mut self) {
+        self.used = [0; T];
+        self.overflow = 0;
+    }
+
+    /// Adds a visit of a Gaussian with real label `label` (≠ 0) to row `y`: weights `w`,
+    /// 0 where a pixel took nothing. Sums add in front-to-back order, as the reference vote
+    /// does (0 + w == w and s + 0 == s exactly, so the lanes that took nothing change nothing).
+    #[inline(always)]
+    pub fn add(&mut self, y: usize, label: u32, w: &[f32; T]) {
+        let used = self.used[y];
+        let labels = &self.label[y];
+        let mut slot = used;
+        for s in (0..ROW_LABELS).rev() {
+            if s < used && labels[s] == label {
+                slot = s;
+            }
+        }
+        if slot < used {
+            for (s, &wi) in self.sum[y][slot].iter_mut().zip(w) {
+                *s += wi;
+            }
+        } else if used < ROW_LABELS {
+            self.label[y][used] = label;
+            self.sum[y][used] = *w;
+            self.used[y] = used + 1;
+        } else {
+            self.overflow |= 1 << y;
+        }
+    }
+
+    /// Whether row `y` met more labels than it could track (vote its pixels another way).
+    #[inline(always)]
+    pub fn overflowed(&self, y: usize) -> bool {
+        (self.overflow >> y) & 1 != 0
+    }
+
+    /// The voted label of each pixel of row `y`: the largest sum, ties to the smaller label;
+    /// 0 where no real label contributed (weights are positive, so a sum > 0 means taken).
+    #[inline(always)]
+    pub fn winners(&self, y: usize) -> [u32; T] {
+        let (mut best_l, mut best_s) = ([0u32; T], [0.0f32; T]);
+        for slot in 0..self.used[y] {
+            let (l, sum) = (self.label[y][slot], &self.sum[y][slot]);
+            for x in 0..T {
+                let s = sum[x];
+                let wins = (s > 0.0)
+                    & ((best_l[x] == 0) | (s > best_s[x]) | ((s == best_s[x]) & (l < best_l[x])));
+                best_l[x] = if wins { l } else { best_l[x] };
+                best_s[x] = if wins { s } else { best_s[x] };
+            }
+        }
+        best_l
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::voting::vote;
+
+    #[test]
+    fn winners_match_the_reference_vote() {
+        let mut seed = 99u64;
+        let mut rnd = move || {
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (seed >> 33) as u32
+        };
+        let mut v = RowVotes::new();
+        let mut sums = Vec::new();
+        for case in 0..500 {
+            v.clear();
+            let labels = 1 + rnd() % 11;
+            let visits = 1 + rnd() as usize % 40;
+            let mut per_pixel: Vec<Vec<(u32, f32)>> = vec![Vec::new(); T];
+            let mut met = std::collections::BTreeSet::new();
+            for _ in 0..visits {
+                // Labels 0..labels (0 = none); weights on a coarse grid so sums tie.
+                let label = rnd() % (labels + 1);
+                let mut w = [0.0f32; T];
+                for (x, wx) in w.iter_mut().enumerate() {
+                    if rnd() % 2 == 0 {
+                        *wx = (1 + rnd() % 4) as f32 / 8.0;
+                        per_pixel[x].push((label, *wx));
+                    }
+                }
+                if label != 0 {
+                    met.insert(label);
+                    v.add(3, label, &w);
+                }
+            }
+            assert_eq!(v.overflowed(3), met.len() > ROW_LABELS, "case {case}");
+            if v.overflowed(3) {
+                continue;
+            }
+            let got = v.winners(3);
+            for x in 0..T {
+                let want = vote(per_pixel[x].iter().copied(), &mut sums);
+                assert_eq!(got[x], want, "case {case} pixel {x}");
+            }
+        }
+    }
+
+    #[test]
+    fn a_ninth_label_overflows_the_row() {
+        let mut v = RowVotes::new();
+        let w = [0.5f32; T];
+        for l in 1..=ROW_LABELS as u32 {
+            v.add(0, l, &w);
+        }
+        assert!(!v.overflowed(0));
+        v.add(0, 100, &w);
+        assert!(v.overflowed(0));
+        assert!(!v.overflowed(1));
+    }
+}
