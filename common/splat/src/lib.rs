@@ -17,6 +17,7 @@ mod camera;
 #[cfg(test)]
 mod grad_tests;
 mod grads;
+mod keep_heaviest;
 mod loss;
 mod map;
 mod output;

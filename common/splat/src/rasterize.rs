@@ -22,12 +22,13 @@ use rayon::prelude::*;
 
 use crate::bin::TileBins;
 use crate::blend::{alpha_of, gaussian_power, MIN_ALPHA, MIN_TRANSMITTANCE};
+use crate::keep_heaviest::keep_heaviest;
 use crate::output::{RenderOutput, RenderRequest};
 use crate::project::Projected;
 use crate::row_log::{boxed_rows, ListSimd, PixelLists, RowDst, RowLog, LIST_CAP, STRIDE};
 use crate::row_votes::RowVotes;
 use crate::tiles::{TileGrid, TILE_SIZE};
-use crate::topk::{keep_heaviest, key_rank, select_top_k, topk_key, weight_positions, TopKBand};
+use crate::topk::{key_rank, select_top_k, topk_key, weight_positions, TopKBand};
 use crate::voting::vote;
 
 const T: usize = TILE_SIZE as usize;
@@ -823,10 +824,11 @@ fn build_top_k(
         }
     }
     // The store keeps last frame's length: grow only (no per-frame memset); the band
-    // truncates it to what it used when done.
-    if store.ids.len() < at0 + total {
-        store.ids.resize(at0 + total, 0);
-        store.weights.resize(at0 + total, 0.0);
+    // truncates it to what it used when done. The list readers may store T entries past
+    // the tile's last list.
+    if store.ids.len() < at0 + total + T {
+        store.ids.resize(at0 + total + T, 0);
+        store.weights.resize(at0 + total + T, 0.0);
     }
     band.topk_len += total;
 
@@ -836,8 +838,8 @@ fn build_top_k(
     #[cfg(not(target_arch = "x86_64"))]
     let avx512 = false;
     let (out_ids, out_ws) = (
-        &mut store.ids[at0..at0 + total],
-        &mut store.weights[at0..at0 + total],
+        &mut store.ids[at0..at0 + total + T],
+        &mut store.weights[at0..at0 + total + T],
     );
     // Per row, the pixels whose top-K is not written by the list read-off: chosen from the
     // scratch lists, or replayed (all pixels with contributions, where the log overflowed).

@@ -53,7 +53,9 @@ pub(crate) enum ListSimd {
 
 /// Where the lists of one tile row go: pixel x's `n[x]` entries go nowhere if bit x of
 /// `skip` is set (the caller replays it), to `scratch_*[x]` if bit x of `to_scratch` is set
-/// (n ≤ LIST_CAP), else to `out_*[off[x]..off[x] + n[x]]`.
+/// (n ≤ LIST_CAP), else to `out_*[off[x]..off[x] + n[x]]`. The readers may write anything
+/// into `out_*` past a list's end (up to 16 entries past the row's last list, which `out_*`
+/// must hold): lists are written in order, so a later one, or the caller, overwrites it.
 pub(crate) struct RowDst<'a> {
     pub out_ids: &'a mut [u32],
     pub out_ws: &'a mut [f32],
@@ -103,7 +105,7 @@ impl RowLog {
     /// Writes each pixel's (id, weight) list of row `y`, front to back, where `dst` says.
     /// The row must not have overflowed; `dst.n` must be the pixels' contribution counts.
     #[inline(always)]
-    pub fn write_lists(&self, y: usize, simd: ListSimd, dst: &mut RowDst) {
+    pub fn write_lists(&mut self, y: usize, simd: ListSimd, dst: &mut RowDst) {
         debug_assert!(!self.overflowed[y]);
         #[cfg(target_arch = "x86_64")]
         if simd == ListSimd::Avx512 {
@@ -120,7 +122,7 @@ impl RowLog {
         match simd {
             #[cfg(target_arch = "x86_64")]
             ListSimd::Avx2 => {
-                // SAFETY: the caller passes Avx2 only after detecting AVX2 on this CPU.
+                // SAFETY: the caller passes Avx2 only after detecting AVX2 and POPCNT on this CPU.
                 unsafe { self.walk_columns_avx2(y, fits, dst) };
                 // Lists longer than the scratch (whole top-Ks, when K > LIST_CAP).
                 self.walk_columns_one_by_one(y, !fits & ((1 << T) - 1), 0, dst);
@@ -192,9 +194,9 @@ impl RowLog {
     /// its scratch list (the room past LIST_CAP takes the overhang).
     ///
     /// # Safety
-    /// The caller must ensure the CPU supports AVX2.
+    /// The caller must ensure the CPU supports AVX2 and POPCNT.
     #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2")]
+    #[target_feature(enable = "avx2,popcnt")]
     unsafe fn walk_columns_avx2(&self, y: usize, fits: u32, dst: &mut RowDst) {
         use std::arch::x86_64::*;
         let n = self.n[y];
@@ -239,74 +241,87 @@ impl RowLog {
         }
     }
 
-    /// [`RowLog::write_lists`] 16 visits at a time: a 16×16 transpose turns them into 16
-    /// pixel columns, a compress keeps each pixel's contributions, a masked store appends them.
+    /// [`RowLog::write_lists`] 16 visits at a time: each block of 16 visits is transposed in
+    /// place (16×16 in registers) into 16 pixel columns; then pixel by pixel, each column is
+    /// compressed to the pixel's contributions and stored as a whole vector. Pixel by pixel,
+    /// the stores run down the output in order (one stream per array, not 16 interleaved
+    /// ones), and a vector's lanes past the list land where later lists (or the scratch's
+    /// room past LIST_CAP) overwrite them: `dst.out_*` must hold 16 entries past the last list.
     ///
     /// # Safety
     /// The caller must ensure the CPU supports AVX-512 F and POPCNT.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx512f,popcnt")]
-    unsafe fn write_lists_avx512(&self, y: usize, dst: &mut RowDst) {
+    unsafe fn write_lists_avx512(&mut self, y: usize, dst: &mut RowDst) {
         use std::arch::x86_64::*;
-        // Each pixel's destination as a pointer and the room behind it (checked below).
-        let mut at_ids = [std::ptr::null_mut::<u32>(); T];
-        let mut at_ws = [std::ptr::null_mut::<f32>(); T];
-        let mut room = [0usize; T];
-        for x in 0..T {
-            if (dst.skip >> x) & 1 != 0 {
-                continue;
-            } else if (dst.to_scratch >> x) & 1 != 0 {
-                at_ids[x] = dst.scratch_ids[x].as_mut_ptr();
-                at_ws[x] = dst.scratch_ws[x].as_mut_ptr();
-                room[x] = STRIDE;
-            } else {
-                let (off, n) = (dst.off[x], dst.n[x]);
-                assert!(off + n <= dst.out_ids.len() && off + n <= dst.out_ws.len());
-                // SAFETY: off ≤ len, just checked.
-                at_ids[x] = unsafe { dst.out_ids.as_mut_ptr().add(off) };
-                at_ws[x] = unsafe { dst.out_ws.as_mut_ptr().add(off) };
-                room[x] = n;
-            }
-        }
         let n = self.n[y];
         let zero = _mm512_setzero_ps();
-        let mut len = [0usize; T];
+        let w = &mut self.w[y];
         for b in (0..n).step_by(T) {
             // Visits past the last read as "no contribution". (Plain loops here and in the
             // transpose: closures would not inherit the target feature, nor be inlined.)
             let mut rows = [zero; T];
             for (v, row) in rows.iter_mut().enumerate().take(n - b) {
                 // SAFETY: in bounds of the visit's 16 weights.
-                *row = unsafe { _mm512_loadu_ps(self.w[y][b + v].as_ptr()) };
+                *row = unsafe { _mm512_loadu_ps(w[b + v].as_ptr()) };
             }
             let columns = transpose16(rows);
-            // ROW_CAP is a multiple of 16, so the block's 16 ids are in bounds (ids past
-            // the last visit are compressed away with their zero weights).
-            let ids = _mm512_loadu_si512(self.g[y][b..b + T].as_ptr().cast());
-            for x in 0..T {
-                if (dst.skip >> x) & 1 != 0 {
-                    continue;
-                }
-                let m = _mm512_cmp_ps_mask::<_CMP_GT_OQ>(columns[x], zero);
-                let c = m.count_ones() as usize;
-                // Memory safety does not rest on the counts matching the log.
-                assert!(len[x] + c <= room[x]);
-                let keep = ((1u32 << c) - 1) as __mmask16;
-                // SAFETY: the masked stores write c elements at len[x], checked in room.
+            // ROW_CAP is a multiple of 16: the whole block is in the log.
+            for (x, c) in columns.iter().enumerate() {
+                // SAFETY: in bounds of the log entry's 16 lanes.
+                unsafe { _mm512_storeu_ps(w[b + x].as_mut_ptr(), *c) };
+            }
+        }
+        let g = &self.g[y];
+        for x in 0..T {
+            // Nothing to write (pixels past a partial tile's edge have no region at all).
+            if (dst.skip >> x) & 1 != 0 || dst.n[x] == 0 {
+                continue;
+            }
+            // The pixel's destination, and the room behind it for whole-vector stores.
+            let (at_ids, at_ws, room) = if (dst.to_scratch >> x) & 1 != 0 {
+                (
+                    dst.scratch_ids[x].as_mut_ptr(),
+                    dst.scratch_ws[x].as_mut_ptr(),
+                    STRIDE,
+                )
+            } else {
+                let off = dst.off[x];
+                let room = dst.out_ids.len().min(dst.out_ws.len());
+                assert!(off <= room, "list offset past the output");
+                // SAFETY: off ≤ len, just checked.
                 unsafe {
-                    _mm512_mask_storeu_ps(
-                        at_ws[x].add(len[x]),
-                        keep,
-                        _mm512_maskz_compress_ps(m, columns[x]),
-                    );
-                    _mm512_mask_storeu_epi32(
-                        at_ids[x].add(len[x]).cast(),
-                        keep,
+                    (
+                        dst.out_ids.as_mut_ptr().add(off),
+                        dst.out_ws.as_mut_ptr().add(off),
+                        room - off,
+                    )
+                }
+            };
+            let mut len = 0usize;
+            for b in (0..n).step_by(T) {
+                // SAFETY: block b's column x and ids are in the log (ROW_CAP is a multiple
+                // of 16).
+                let (column, ids) = unsafe {
+                    (
+                        _mm512_loadu_ps(w[b + x].as_ptr()),
+                        _mm512_loadu_si512(g[b..b + T].as_ptr().cast()),
+                    )
+                };
+                let m = _mm512_cmp_ps_mask::<_CMP_GT_OQ>(column, zero);
+                // Memory safety does not rest on the counts matching the log.
+                assert!(len + T <= room, "list store past its room");
+                // SAFETY: 16 lanes at len are within room, just checked.
+                unsafe {
+                    _mm512_storeu_ps(at_ws.add(len), _mm512_maskz_compress_ps(m, column));
+                    _mm512_storeu_si512(
+                        at_ids.add(len).cast(),
                         _mm512_maskz_compress_epi32(m, ids),
                     );
                 }
-                len[x] += c;
+                len += m.count_ones() as usize;
             }
+            debug_assert_eq!(len, dst.n[x], "pixel {x}: log and counts disagree");
         }
     }
 }
@@ -441,7 +456,7 @@ mod tests {
             off[x] = off[x - 1] + n[x - 1];
         }
         let total = off[T - 1] + n[T - 1];
-        let (mut out_ids, mut out_ws) = (vec![0u32; total], vec![0.0f32; total]);
+        let (mut out_ids, mut out_ws) = (vec![0u32; total + T], vec![0.0f32; total + T]);
         let mut scratch_ids = Box::new([[0u32; STRIDE]; T]);
         let mut scratch_ws = Box::new([[0.0f32; STRIDE]; T]);
         let mut dst = RowDst {
@@ -478,7 +493,9 @@ mod tests {
         let mut v = vec![ListSimd::Portable];
         #[cfg(target_arch = "x86_64")]
         {
-            if std::arch::is_x86_feature_detected!("avx2") {
+            if std::arch::is_x86_feature_detected!("avx2")
+                && std::arch::is_x86_feature_detected!("popcnt")
+            {
                 v.push(ListSimd::Avx2);
             }
             if std::arch::is_x86_feature_detected!("avx512f")
@@ -502,6 +519,49 @@ mod tests {
                     .collect();
                 assert_eq!(list.as_ref(), Some(&want), "{simd:?} pixel {x}");
             }
+        }
+    }
+
+    #[test]
+    fn pixels_without_contributions_write_nothing() {
+        // A partial tile: pixels 12–15 are past the image edge (no region, offset 0), pixel 5
+        // took nothing; the other lists go to the output back to back.
+        for simd in simds_here() {
+            let mut log = RowLog::new();
+            for v in 0..21 {
+                let w: [f32; T] = std::array::from_fn(|x| {
+                    if x < 12 && x != 5 {
+                        (v + 1) as f32
+                    } else {
+                        0.0
+                    }
+                });
+                log.push(2, v as u32, &w);
+            }
+            let n: [usize; T] = std::array::from_fn(|x| if x < 12 && x != 5 { 21 } else { 0 });
+            let mut off = [0usize; T];
+            for x in 1..12 {
+                off[x] = off[x - 1] + n[x - 1];
+            }
+            let total = 11 * 21;
+            let (mut out_ids, mut out_ws) = (vec![7u32; total + T], vec![-1.0f32; total + T]);
+            let mut scratch_ids = Box::new([[0u32; STRIDE]; T]);
+            let mut scratch_ws = Box::new([[0.0f32; STRIDE]; T]);
+            let mut dst = RowDst {
+                out_ids: &mut out_ids,
+                out_ws: &mut out_ws,
+                off,
+                n,
+                scratch_ids: &mut scratch_ids,
+                scratch_ws: &mut scratch_ws,
+                to_scratch: 0,
+                skip: 0,
+            };
+            log.write_lists(2, simd, &mut dst);
+            let want_ids: Vec<u32> = (0..11).flat_map(|_| 0..21).collect();
+            let want_ws: Vec<f32> = (0..11).flat_map(|_| (1..22).map(|v| v as f32)).collect();
+            assert_eq!(&out_ids[..total], &want_ids[..], "{simd:?}");
+            assert_eq!(&out_ws[..total], &want_ws[..], "{simd:?}");
         }
     }
 

@@ -1,0 +1,369 @@
+//! The K heaviest of a pixel's contributions when it has more than K (METHOD §3's G_topK),
+//! kept in front-to-back order: a quickselect whose candidates are lane bit masks.
+
+/// Longest list [`keep_heaviest`] takes (its lane masks are four 64-bit words).
+pub const KEEP_MAX: usize = 256;
+
+/// Writes the `dst.len()` heaviest of the `n` contributions `(ids, ws)` (front to back, ties
+/// to the front one) into `dst`, in their front-to-back order. `ws` holds positive weights
+/// and is padded with zeros to a multiple of 64 (at most [`KEEP_MAX`]).
+///
+/// Quickselect on the weights with the candidates as lane bit masks: each step is two
+/// branch-free compares over the list (vector compares on SIMD builds) and a few popcounts,
+/// and a step leaves about half the candidates; much cheaper for the few dozen entries of a
+/// pixel than sorting keys (`select_nth_unstable`'s data-dependent branches mispredict).
+#[inline(always)]
+pub fn keep_heaviest(
+    ids: &[u32],
+    ws: &[f32],
+    n: usize,
+    dst_ids: &mut [u32],
+    dst_ws: &mut [f32],
+    avx512: bool,
+) {
+    let m = dst_ids.len();
+    #[cfg(target_arch = "x86_64")]
+    if avx512 && n <= 64 {
+        assert!(
+            ids.len() >= 64 && ws.len() >= 64,
+            "keep_heaviest: lists not padded"
+        );
+        // SAFETY: the caller says the CPU has AVX-512 F and BW; both lists hold 64 lanes.
+        unsafe { keep_heaviest_64_avx512(ids, ws, n, dst_ids, dst_ws) };
+        return;
+    }
+    let nw = n.div_ceil(64);
+    debug_assert!(m >= 1 && m < n && n <= KEEP_MAX && ws.len() >= 64 * nw);
+    debug_assert!(ws[n..64 * nw].iter().all(|&w| w == 0.0));
+    let (blocks, _) = ws.as_chunks::<64>();
+    let mut cand = [0u64; 4];
+    for (b, c) in cand.iter_mut().enumerate().take(nw) {
+        let left = n - 64 * b;
+        *c = if left >= 64 { !0 } else { (1u64 << left) - 1 };
+    }
+    // The m-th largest weight: `need` of the candidates are still to be kept.
+    let mut need = m;
+    let p = loop {
+        let p = pivot(ws, &cand, nw, need);
+        let (mut gt, mut eq) = ([0u64; 4], [0u64; 4]);
+        let (mut n_gt, mut n_eq) = (0, 0);
+        for b in 0..nw {
+            let (above, equal) = lanes_above_equal(&blocks[b], p, avx512);
+            gt[b] = cand[b] & above;
+            eq[b] = cand[b] & equal;
+            n_gt += gt[b].count_ones() as usize;
+            n_eq += eq[b].count_ones() as usize;
+        }
+        if n_gt >= need {
+            cand = gt;
+        } else if n_gt + n_eq >= need {
+            break p;
+        } else {
+            need -= n_gt + n_eq;
+            for b in 0..nw {
+                cand[b] &= !(gt[b] | eq[b]);
+            }
+        }
+    };
+    // Keep everything heavier than p, and the front ones of those equal to it.
+    let mut keep = [0u64; 4];
+    let mut ties = m;
+    let mut equal = [0u64; 4];
+    for b in 0..nw {
+        (keep[b], equal[b]) = lanes_above_equal(&blocks[b], p, avx512);
+        ties -= keep[b].count_ones() as usize;
+    }
+    for b in 0..nw {
+        let mut eq = equal[b];
+        while ties > 0 && eq != 0 {
+            keep[b] |= eq & eq.wrapping_neg();
+            eq &= eq - 1;
+            ties -= 1;
+        }
+    }
+    #[cfg(target_arch = "x86_64")]
+    if avx512 {
+        assert!(ids.len() >= 64 * nw, "keep_heaviest: ids not padded");
+        // SAFETY: the caller says the CPU has AVX-512 F and BW; ids and ws hold 64·nw lanes.
+        unsafe { emit_kept_avx512(ids, ws, &keep, nw, dst_ids, dst_ws) };
+        return;
+    }
+    let mut j = 0;
+    for (b, &word) in keep.iter().enumerate().take(nw) {
+        let mut k = word;
+        while k != 0 {
+            let i = 64 * b + k.trailing_zeros() as usize;
+            dst_ids[j] = ids[i];
+            dst_ws[j] = ws[i];
+            j += 1;
+            k &= k - 1;
+        }
+    }
+    debug_assert_eq!(j, m);
+}
+
+/// [`keep_heaviest`] for lists of at most 64 on AVX-512: the weights stay in four registers,
+/// the candidates in one 64-bit mask, and a step is eight compares and two popcounts.
+///
+/// # Safety
+/// The CPU must support AVX-512 F and BW; `ids` and `ws` must hold at least 64 lanes.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx512bw,popcnt,bmi1,lzcnt")]
+#[inline]
+unsafe fn keep_heaviest_64_avx512(
+    ids: &[u32],
+    ws: &[f32],
+    n: usize,
+    dst_ids: &mut [u32],
+    dst_ws: &mut [f32],
+) {
+    use std::arch::x86_64::*;
+    let m = dst_ids.len();
+    // SAFETY: ws holds 64 lanes (caller). (No closure: it would not take the features.)
+    let v: [__m512; 4] = unsafe {
+        [
+            _mm512_loadu_ps(ws.as_ptr()),
+            _mm512_loadu_ps(ws.as_ptr().add(16)),
+            _mm512_loadu_ps(ws.as_ptr().add(32)),
+            _mm512_loadu_ps(ws.as_ptr().add(48)),
+        ]
+    };
+    let mut cand: u64 = if n == 64 { !0 } else { (1u64 << n) - 1 };
+    let mut need = m;
+    let p = loop {
+        let first = cand.trailing_zeros() as usize;
+        let last = 63 - cand.leading_zeros() as usize;
+        let mid = (cand & (!0u64 << ((first + last) / 2))).trailing_zeros() as usize;
+        let p = sample_pivot(
+            [ws[first], ws[mid], ws[last]],
+            need,
+            cand.count_ones() as usize,
+        );
+        let (gt, eq) = masks64(&v, p);
+        let (gt, eq) = (gt & cand, eq & cand);
+        let (n_gt, n_eq) = (gt.count_ones() as usize, eq.count_ones() as usize);
+        if n_gt >= need {
+            cand = gt;
+        } else if n_gt + n_eq >= need {
+            break p;
+        } else {
+            need -= n_gt + n_eq;
+            cand &= !(gt | eq);
+        }
+    };
+    // Everything heavier than p, and the front ones of those equal to it.
+    let (mut keep, mut equal) = masks64(&v, p);
+    let mut ties = m - keep.count_ones() as usize;
+    while ties > 0 && equal != 0 {
+        keep |= equal & equal.wrapping_neg();
+        equal &= equal - 1;
+        ties -= 1;
+    }
+    // SAFETY: the CPU has AVX-512 F (caller), both lists hold 64 lanes.
+    unsafe { emit_kept_avx512(ids, ws, &[keep, 0, 0, 0], 1, dst_ids, dst_ws) };
+}
+
+/// The lanes of 64 weights in four registers above `p`, and equal to it. (A plain function,
+/// inlined into its AVX-512 caller: a closure would not take the caller's target features.)
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+fn masks64(v: &[std::arch::x86_64::__m512; 4], p: f32) -> (u64, u64) {
+    use std::arch::x86_64::*;
+    // SAFETY: only reached from keep_heaviest_64_avx512, whose caller checked AVX-512 F.
+    unsafe {
+        let pv = _mm512_set1_ps(p);
+        let (mut above, mut equal) = (0u64, 0u64);
+        for (q, &vq) in v.iter().enumerate() {
+            above |= (_mm512_cmp_ps_mask::<_CMP_GT_OQ>(vq, pv) as u64) << (16 * q);
+            equal |= (_mm512_cmp_ps_mask::<_CMP_EQ_OQ>(vq, pv) as u64) << (16 * q);
+        }
+        (above, equal)
+    }
+}
+
+/// Bit masks of the lanes of `block` above `p` and equal to it. `avx512`: the CPU has
+/// AVX-512 F and BW (four compares into mask registers instead of building the bits).
+#[inline(always)]
+fn lanes_above_equal(block: &[f32; 64], p: f32, avx512: bool) -> (u64, u64) {
+    #[cfg(target_arch = "x86_64")]
+    if avx512 {
+        // SAFETY: the caller says the CPU has AVX-512 F and BW.
+        return unsafe { lanes_above_equal_avx512(block, p) };
+    }
+    let _ = avx512;
+    let (mut above, mut equal) = (0u64, 0u64);
+    for (i, &w) in block.iter().enumerate() {
+        above |= ((w > p) as u64) << i;
+        equal |= ((w == p) as u64) << i;
+    }
+    (above, equal)
+}
+
+/// Writes the lanes set in `keep` (exactly `dst_ids.len()` of them) of `ids` and `ws`, in
+/// order, with compresses and masked stores.
+///
+/// # Safety
+/// The CPU must support AVX-512 F; `ids` and `ws` must hold at least 64·nw lanes.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,popcnt")]
+#[inline]
+unsafe fn emit_kept_avx512(
+    ids: &[u32],
+    ws: &[f32],
+    keep: &[u64; 4],
+    nw: usize,
+    dst_ids: &mut [u32],
+    dst_ws: &mut [f32],
+) {
+    use std::arch::x86_64::*;
+    let total: u32 = keep[..nw].iter().map(|k| k.count_ones()).sum();
+    assert_eq!(total as usize, dst_ids.len(), "keep_heaviest: kept count");
+    assert_eq!(dst_ws.len(), dst_ids.len());
+    let mut j = 0usize;
+    for (b, &word) in keep.iter().enumerate().take(nw) {
+        for q in 0..4 {
+            let k = (word >> (16 * q)) as u16;
+            let c = k.count_ones() as usize;
+            let lane = 64 * b + 16 * q;
+            // SAFETY: lanes lane..lane + 16 are in ids and ws (64·nw of each); the stores
+            // write c ≤ dst.len() − j elements at j (the kept counts sum to dst.len()).
+            unsafe {
+                let v = _mm512_loadu_ps(ws.as_ptr().add(lane));
+                let g = _mm512_loadu_si512(ids.as_ptr().add(lane).cast());
+                let front = ((1u32 << c) - 1) as u16;
+                _mm512_mask_storeu_ps(
+                    dst_ws.as_mut_ptr().add(j),
+                    front,
+                    _mm512_maskz_compress_ps(k, v),
+                );
+                _mm512_mask_storeu_epi32(
+                    dst_ids.as_mut_ptr().add(j).cast(),
+                    front,
+                    _mm512_maskz_compress_epi32(k, g),
+                );
+            }
+            j += c;
+        }
+    }
+}
+
+/// [`lanes_above_equal`] on AVX-512.
+///
+/// # Safety
+/// The caller must ensure the CPU supports AVX-512 F and BW.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx512bw")]
+#[inline]
+unsafe fn lanes_above_equal_avx512(block: &[f32; 64], p: f32) -> (u64, u64) {
+    use std::arch::x86_64::*;
+    let pv = _mm512_set1_ps(p);
+    let (mut above, mut equal) = (0u64, 0u64);
+    for q in 0..4 {
+        // SAFETY: lanes 16q..16q + 16 of a 64-lane block.
+        let v = unsafe { _mm512_loadu_ps(block.as_ptr().add(16 * q)) };
+        above |= (_mm512_cmp_ps_mask::<_CMP_GT_OQ>(v, pv) as u64) << (16 * q);
+        equal |= (_mm512_cmp_ps_mask::<_CMP_EQ_OQ>(v, pv) as u64) << (16 * q);
+    }
+    (above, equal)
+}
+
+/// A pivot from the first, last and middle candidates: the one whose rank among the three
+/// is nearest the target's (the `need`-th largest candidate), so the steps close in on it.
+#[inline(always)]
+fn pivot(ws: &[f32], cand: &[u64; 4], nw: usize, need: usize) -> f32 {
+    let first = first_candidate_from(cand, nw, 0);
+    let mut last = 0;
+    for b in (0..nw).rev() {
+        if cand[b] != 0 {
+            last = 64 * b + 63 - cand[b].leading_zeros() as usize;
+            break;
+        }
+    }
+    let mid = first_candidate_from(cand, nw, (first + last) / 2);
+    let count: usize = cand[..nw].iter().map(|c| c.count_ones() as usize).sum();
+    sample_pivot([ws[first], ws[mid], ws[last]], need, count)
+}
+
+/// Of three sampled weights: the largest when the target is in the top third of the
+/// `count` candidates, the smallest in the bottom third, else the median.
+#[inline(always)]
+fn sample_pivot([a, b, c]: [f32; 3], need: usize, count: usize) -> f32 {
+    if 3 * need <= count {
+        a.max(b).max(c)
+    } else if 3 * need >= 2 * count {
+        a.min(b).min(c)
+    } else {
+        a.max(b).min(a.min(b).max(c))
+    }
+}
+
+/// Position of the first candidate at or after `from` (one exists: `last` is one).
+#[inline(always)]
+fn first_candidate_from(cand: &[u64; 4], nw: usize, from: usize) -> usize {
+    let mut b = from / 64;
+    let mut word = cand[b] & (!0u64 << (from % 64));
+    while word == 0 && b + 1 < nw {
+        b += 1;
+        word = cand[b];
+    }
+    64 * b + word.trailing_zeros() as usize
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::topk::{key_rank, key_weight, select_top_k, topk_key};
+
+    #[test]
+    fn keep_heaviest_matches_selection() {
+        let mut seed = 12345u64;
+        let mut rnd = move || {
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (seed >> 33) as u32
+        };
+        for case in 0..2000 {
+            let n = 2 + (rnd() as usize % (KEEP_MAX - 1));
+            let m = 1 + (rnd() as usize % (n - 1));
+            // Few distinct values in some cases, so ties straddle the cut.
+            let levels = if case % 3 == 0 {
+                1 + rnd() % 5
+            } else {
+                1 << 20
+            };
+            let ws: Vec<f32> = (0..n)
+                .map(|_| (1 + rnd() % levels) as f32 / (levels + 1) as f32)
+                .collect();
+            let mut keys: Vec<u64> = ws
+                .iter()
+                .enumerate()
+                .map(|(i, &w)| topk_key(w, i as u32))
+                .collect();
+            let want: Vec<(u32, f32)> = select_top_k(&mut keys, m, false)
+                .iter()
+                .map(|&k| (key_rank(k), key_weight(k)))
+                .collect();
+            let nn = n.div_ceil(64) * 64;
+            let ids: Vec<u32> = (0..nn as u32).collect();
+            let mut pw = ws.clone();
+            pw.resize(nn, 0.0);
+            let (mut got_ids, mut got_ws) = (vec![0u32; m], vec![0f32; m]);
+            keep_heaviest(&ids, &pw, n, &mut got_ids, &mut got_ws, false);
+            let got_portable: Vec<(u32, f32)> = got_ids
+                .iter()
+                .copied()
+                .zip(got_ws.iter().copied())
+                .collect();
+            #[cfg(target_arch = "x86_64")]
+            if std::arch::is_x86_feature_detected!("avx512f")
+                && std::arch::is_x86_feature_detected!("avx512bw")
+            {
+                keep_heaviest(&ids, &pw, n, &mut got_ids, &mut got_ws, true);
+            }
+            let got: Vec<(u32, f32)> = got_ids.into_iter().zip(got_ws).collect();
+            assert_eq!(got, want, "n {n} m {m} levels {levels}");
+            assert_eq!(got_portable, want, "portable: n {n} m {m} levels {levels}");
+        }
+    }
+}
