@@ -11,6 +11,7 @@ const T: usize = TILE_SIZE as usize;
 
 /// Labels a tile row can track (rows at object borders meet a few).
 pub(crate) const ROW_LABELS: usize = 8;
+const _: () = assert!(ROW_LABELS == 8, "label_hits compares 8 labels");
 
 pub(crate) struct RowVotes {
     /// `[row][slot]`: the labels met on the row, in order of first contribution.
@@ -45,13 +46,12 @@ impl RowVotes {
     #[inline(always)]
     pub fn add(&mut self, y: usize, label: u32, w: &[f32; T]) {
         let used = self.used[y];
-        let labels = &self.label[y];
-        let mut slot = used;
-        for s in (0..ROW_LABELS).rev() {
-            if s < used && labels[s] == label {
-                slot = s;
-            }
-        }
+        let hits = label_hits(&self.label[y], label) & ((1u32 << used) - 1);
+        let slot = if hits != 0 {
+            hits.trailing_zeros() as usize
+        } else {
+            used
+        };
         if slot < used {
             for (s, &wi) in self.sum[y][slot].iter_mut().zip(w) {
                 *s += wi;
@@ -87,6 +87,33 @@ impl RowVotes {
             }
         }
         best_l
+    }
+}
+
+/// Bit s set where `labels[s] == label`: two SSE2 compares on x86_64 (baseline there), a
+/// loop elsewhere.
+#[inline(always)]
+fn label_hits(labels: &[u32; ROW_LABELS], label: u32) -> u32 {
+    #[cfg(target_arch = "x86_64")]
+    {
+        use std::arch::x86_64::*;
+        // SAFETY: SSE2 is part of the x86_64 baseline; the loads read the 8 labels.
+        unsafe {
+            let l = _mm_set1_epi32(label as i32);
+            let a = _mm_loadu_si128(labels.as_ptr().cast());
+            let b = _mm_loadu_si128(labels.as_ptr().add(4).cast());
+            let ma = _mm_movemask_ps(_mm_castsi128_ps(_mm_cmpeq_epi32(a, l))) as u32;
+            let mb = _mm_movemask_ps(_mm_castsi128_ps(_mm_cmpeq_epi32(b, l))) as u32;
+            ma | (mb << 4)
+        }
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        let mut hits = 0u32;
+        for (s, &l) in labels.iter().enumerate() {
+            hits |= ((l == label) as u32) << s;
+        }
+        hits
     }
 }
 
