@@ -303,8 +303,6 @@ struct TileState {
     row_live: [u32; T],
     /// Contributions per pixel so far (lists mode).
     count: [[u32; T]; T],
-    /// GS Voting sums, per tile row.
-    votes: RowVotes,
 }
 
 /// Per-pixel contribution lists of one tile, `[row][lane][slot]`, for the pixels whose top-K
@@ -313,6 +311,8 @@ type Slots<V> = [PixelLists<V>; T];
 
 struct Scratch {
     st: Box<TileState>,
+    /// GS Voting sums, per tile row.
+    row_votes: Box<RowVotes>,
     log: RowLog,
     ids: Box<Slots<u32>>,
     ws: Box<Slots<f32>>,
@@ -330,6 +330,7 @@ thread_local! {
 impl Scratch {
     fn new() -> Self {
         Self {
+            row_votes: Box::new(RowVotes::new()),
             st: Box::new(TileState {
                 t: [[1.0; T]; T],
                 r: [[0.0; T]; T],
@@ -340,7 +341,6 @@ impl Scratch {
                 last: [[0; T]; T],
                 row_live: [0; T],
                 count: [[0; T]; T],
-                votes: RowVotes::new(),
             }),
             log: RowLog::new(),
             ids: boxed_rows([[0; STRIDE]; T]),
@@ -448,7 +448,7 @@ fn tile_kernel<const LISTS: bool, const VOTE: bool>(ctx: &Ctx, scratch: &mut Scr
         scratch.log.clear();
     }
     if VOTE {
-        st.votes.clear();
+        scratch.row_votes.clear();
     }
     let mut live = (rows * cols) as u32;
     let lane_x: [f32; T] = std::array::from_fn(|i| (tx0 + i as u32) as f32);
@@ -507,7 +507,7 @@ fn tile_kernel<const LISTS: bool, const VOTE: bool>(ctx: &Ctx, scratch: &mut Scr
                 continue;
             }
             if VOTE && label != 0 {
-                st.votes.add(ly, label, &w);
+                scratch.row_votes.add(ly, label, &w);
             }
             if LISTS {
                 // w > 0 exactly where the mask bit is set: a vector compare, not bit extraction.
@@ -641,6 +641,7 @@ fn write_tile<const LISTS: bool, const VOTE: bool>(
         if let Some(labels) = band.labels.as_deref_mut() {
             let Scratch {
                 st,
+                row_votes,
                 log,
                 ids,
                 ws,
@@ -658,8 +659,8 @@ fn write_tile<const LISTS: bool, const VOTE: bool>(
             };
             for y in 0..rows {
                 let row = &mut labels[y * w + x0..][..cols];
-                if !st.votes.overflowed(y) {
-                    row.copy_from_slice(&st.votes.winners(y)[..cols]);
+                if !row_votes.overflowed(y) {
+                    row.copy_from_slice(&row_votes.winners(y)[..cols]);
                     continue;
                 }
                 // More labels than the row tracks: vote over each pixel's list, or its replay.
