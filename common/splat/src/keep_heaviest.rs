@@ -108,7 +108,7 @@ pub fn keep_heaviest(
 /// # Safety
 /// The CPU must support AVX-512 F and BW; `ids` and `ws` must hold at least 64 lanes.
 #[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx512f,avx512bw,popcnt,bmi1,lzcnt")]
+#[target_feature(enable = "avx512f,avx512bw,popcnt")]
 #[inline]
 unsafe fn keep_heaviest_64_avx512(
     ids: &[u32],

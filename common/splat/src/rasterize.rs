@@ -7,7 +7,7 @@
 //! bit-identical). For top-K every row visit is logged (one vector of 16 weights, see
 //! `row_log`); at the end of the tile the per-pixel lists are read off the log straight into
 //! the output where a pixel's list fits in K (the usual case), else into scratch lists whose
-//! K heaviest are kept (a quickselect on lane bit masks, see `topk::keep_heaviest`); sorted
+//! K heaviest are kept (a quickselect on lane bit masks, see `keep_heaviest`); sorted
 //! only on request. Voting keeps, per tile row, the few labels the row met and a 16-lane sum
 //! per label (`row_votes`): one vector add per row visit; rows meeting more labels are voted
 //! exactly at the end of the tile, from their pixels' lists or a replay.
@@ -372,7 +372,8 @@ fn run_tile<const LISTS: bool, const VOTE: bool>(
 ) {
     match ctx.simd {
         #[cfg(target_arch = "x86_64")]
-        // SAFETY: `simd_level` chose Avx512 only after detecting avx512f/bw/vl and popcnt on this CPU.
+        // SAFETY: `simd_level` chose Avx512 only after detecting avx512f/bw/vl and popcnt
+        // on this CPU.
         Simd::Avx512 => unsafe { tile_avx512::<LISTS, VOTE>(ctx, scratch, band, tx) },
         #[cfg(target_arch = "x86_64")]
         // SAFETY: `simd_level` chose Avx2 only after detecting avx2 and popcnt on this CPU.

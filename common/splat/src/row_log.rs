@@ -2,7 +2,8 @@
 //! a 16-pixel tile row) as one vector of 16 weights (0 where a pixel took nothing) and the
 //! Gaussian's id, in front-to-back order. The lane loop logs with one vector store per visit;
 //! the per-pixel lists (the top-K's input) are read off the log once the tile is done, with
-//! in-register transposes (16×16 on AVX-512, 8×8 on AVX2; a column walk in portable code).
+//! transposes in registers (16×16 on AVX-512, written back over the log; 8×8 on AVX2; a
+//! column walk in portable code).
 //! Appending to 16 per-pixel lists during the lane loop instead (16 scattered stores per
 //! visit) was the top-K's largest cost.
 
@@ -104,12 +105,14 @@ impl RowLog {
 
     /// Writes each pixel's (id, weight) list of row `y`, front to back, where `dst` says.
     /// The row must not have overflowed; `dst.n` must be the pixels' contribution counts.
+    /// Consumes the row: its log may be left transposed.
     #[inline(always)]
     pub fn write_lists(&mut self, y: usize, simd: ListSimd, dst: &mut RowDst) {
         debug_assert!(!self.overflowed[y]);
         #[cfg(target_arch = "x86_64")]
         if simd == ListSimd::Avx512 {
-            // SAFETY: the caller passes Avx512 only after detecting AVX-512 F and POPCNT on this CPU.
+            // SAFETY: the caller passes Avx512 only after detecting AVX-512 F and POPCNT on
+            // this CPU.
             unsafe { self.write_lists_avx512(y, dst) };
             return;
         }
