@@ -481,7 +481,7 @@ fn tile_kernel<const LISTS: bool, const VOTE: bool>(ctx: &Ctx, scratch: &mut Scr
         if y_hi < y_lo as f32 {
             continue;
         }
-        let mut contributed = 0u32;
+        let mut contributed = false;
         for py in y_lo..y_hi as u32 + 1 {
             let ly = (py - ty0) as usize;
             if st.row_live[ly] == 0 {
@@ -501,25 +501,25 @@ fn tile_kernel<const LISTS: bool, const VOTE: bool>(ctx: &Ctx, scratch: &mut Scr
                 continue;
             }
             let mut w = [0.0f32; T];
-            let (mask, done_now) = blend_row(&g, dy, &lane_x, st, ly, &mut w);
+            let (any, done_now) = blend_row(&g, dy, &lane_x, st, ly, &mut w);
             st.row_live[ly] -= done_now;
             live -= done_now;
-            if mask == 0 {
+            if !any {
                 continue;
             }
             if VOTE && label != 0 {
                 scratch.row_votes.add(ly, label, &w);
             }
             if LISTS {
-                // w > 0 exactly where the mask bit is set: a vector compare, not bit extraction.
+                // w > 0 exactly where a lane contributed.
                 for (c, &wi) in st.count[ly].iter_mut().zip(&w) {
                     *c += (wi > 0.0) as u32;
                 }
                 scratch.log.push(ly, gid, &w);
             }
-            contributed |= mask;
+            contributed = true;
         }
-        if contributed != 0 {
+        if contributed {
             if let Some(v) = ctx.visible {
                 v[gi].store(true, Ordering::Relaxed);
             }
@@ -528,8 +528,9 @@ fn tile_kernel<const LISTS: bool, const VOTE: bool>(ctx: &Ctx, scratch: &mut Scr
 }
 
 /// Composites one Gaussian over the 16 pixels of tile row `ly`. Writes each lane's weight
-/// α·T (0 where it did not contribute) into `w`; returns (bit mask of contributing lanes,
-/// number of pixels that became done).
+/// α·T (0 where it did not contribute) into `w`; returns (whether any lane contributed,
+/// number of pixels that became done). (A bool, not a lane mask: a mask built lane by lane
+/// compiles to a vector OR-reduction on the loop's critical path.)
 #[inline(always)]
 fn blend_row(
     g: &LaneGaussian,
@@ -538,12 +539,12 @@ fn blend_row(
     st: &mut TileState,
     ly: usize,
     w: &mut [f32; T],
-) -> (u32, u32) {
+) -> (bool, u32) {
     let t = &mut st.t[ly];
     let (r, gr, b) = (&mut st.r[ly], &mut st.g[ly], &mut st.b[ly]);
     let (d, s) = (&mut st.d[ly], &mut st.s[ly]);
     let last = &mut st.last[ly];
-    let mut mask = 0u32;
+    let mut any = false;
     let mut newly_done = 0u32;
     for i in 0..T {
         let dx = g.mean_x - lane_x[i];
@@ -570,10 +571,10 @@ fn blend_row(
         };
         last[i] = if contrib { g.rank1 } else { last[i] };
         newly_done += done_now as u32;
-        mask |= (contrib as u32) << i;
+        any |= contrib;
         w[i] = wi;
     }
-    (mask, newly_done)
+    (any, newly_done)
 }
 
 /// Weights (tile rank, α·T) of one pixel's contributions, front to back: the kernel's
