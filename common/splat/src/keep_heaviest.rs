@@ -311,18 +311,16 @@ fn first_candidate_from(cand: &[u64; 4], nw: usize, from: usize) -> usize {
 
 #[cfg(test)]
 mod tests {
+    use rand::{Rng, SeedableRng};
+    use rand_chacha::ChaCha8Rng;
+
     use super::*;
     use crate::topk::{key_rank, key_weight, select_top_k, topk_key};
 
     #[test]
     fn keep_heaviest_matches_selection() {
-        let mut seed = 12345u64;
-        let mut rnd = move || {
-            seed = seed
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (seed >> 33) as u32
-        };
+        let mut rng = ChaCha8Rng::seed_from_u64(12345);
+        let mut rnd = move || rng.gen::<u32>();
         for case in 0..2000 {
             let n = 2 + (rnd() as usize % (KEEP_MAX - 1));
             let m = 1 + (rnd() as usize % (n - 1));

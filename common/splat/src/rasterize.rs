@@ -22,7 +22,7 @@ use rayon::prelude::*;
 
 use crate::bin::TileBins;
 use crate::blend::{alpha_of, gaussian_power, MIN_ALPHA, MIN_TRANSMITTANCE};
-use crate::keep_heaviest::keep_heaviest;
+use crate::keep_heaviest::{keep_heaviest, KEEP_MAX};
 use crate::output::{RenderOutput, RenderRequest};
 use crate::project::Projected;
 use crate::row_log::{boxed_rows, ListSimd, PixelLists, RowDst, RowLog, LIST_CAP, STRIDE};
@@ -33,8 +33,12 @@ use crate::voting::vote;
 
 const T: usize = TILE_SIZE as usize;
 
-/// Longest list ranked branch-free ([`weight_positions`]); longer ones use a selection.
+/// Longest list ranked branch-free ([`weight_positions`]) for a sorted top-K; longer ones use
+/// a selection.
 const RANK_MAX: usize = 128;
+
+// Every scratch list longer than K fits `keep_heaviest`.
+const _: () = assert!(LIST_CAP <= KEEP_MAX);
 
 /// Rasterizes projected, binned Gaussians. `labels` are the map's labels (for voting).
 pub fn rasterize(
@@ -894,14 +898,32 @@ fn build_top_k(
             xs &= xs - 1;
             let o = y * w + x0 + x;
             let n = st.count[y][x] as usize;
+            // Pixels whose whole list went to the output are not in `later`.
             let listed = has_list(log, y, n, k, sort);
-            if listed && top_k_is_whole_list(n, k, sort) {
-                continue;
-            }
             let (s, m) = (start[o] as usize, count[o] as usize);
             let dst_ids = &mut store.ids[s..s + m];
             let dst_ws = &mut store.weights[s..s + m];
-            if listed && n <= RANK_MAX && (sort || n <= k) {
+            if !listed {
+                let (px, py) = ((x0 + x) as u32, (band.band * T + y) as u32);
+                replay_pixel(ctx.projected, list, px, py, replay);
+                keys.clear();
+                keys.extend(
+                    replay
+                        .iter()
+                        .enumerate()
+                        .map(|(i, c)| topk_key(c.1, i as u32)),
+                );
+                for (j, &key) in select_top_k(keys, k, sort).iter().enumerate() {
+                    let (r, wt) = replay[key_rank(key) as usize];
+                    dst_ids[j] = list[r as usize];
+                    dst_ws[j] = wt;
+                }
+            } else if !sort {
+                // Longer than K: the K heaviest, front to back.
+                let (ids, ws) = (&scratch_ids[y][x], &mut scratch_ws[y][x]);
+                ws[n..n.div_ceil(64) * 64].fill(0.0);
+                keep_heaviest(ids, ws, n, dst_ids, dst_ws, avx512);
+            } else if n <= RANK_MAX {
                 let (ids, ws) = (&scratch_ids[y][x], &mut scratch_ws[y][x]);
                 // Padding weights of −1 never outrank a real one.
                 let nn = n.div_ceil(16) * 16;
@@ -921,44 +943,21 @@ fn build_top_k(
                     33..=64 => rank_in!(64),
                     _ => rank_in!(128),
                 }
-                let mut j = 0;
                 for i in 0..n {
                     let p = pos[i] as usize;
                     if p < m {
-                        let d = if sort { p } else { j };
-                        dst_ids[d] = ids[i];
-                        dst_ws[d] = ws[i];
-                        j += 1;
+                        dst_ids[p] = ids[i];
+                        dst_ws[p] = ws[i];
                     }
                 }
-            } else if listed && !sort {
-                // Longer than K: the K heaviest, front to back.
-                let (ids, ws) = (&scratch_ids[y][x], &mut scratch_ws[y][x]);
-                ws[n..n.div_ceil(64) * 64].fill(0.0);
-                keep_heaviest(ids, ws, n, dst_ids, dst_ws, avx512);
-            } else if listed {
+            } else {
                 let (ids, ws) = (&scratch_ids[y][x][..n], &scratch_ws[y][x][..n]);
                 keys.clear();
                 keys.extend(ws.iter().enumerate().map(|(i, &wt)| topk_key(wt, i as u32)));
-                for (j, &key) in select_top_k(keys, k, sort).iter().enumerate() {
+                for (j, &key) in select_top_k(keys, k, true).iter().enumerate() {
                     let i = key_rank(key) as usize;
                     dst_ids[j] = ids[i];
                     dst_ws[j] = ws[i];
-                }
-            } else {
-                let (px, py) = ((x0 + x) as u32, (band.band * T + y) as u32);
-                replay_pixel(ctx.projected, list, px, py, replay);
-                keys.clear();
-                keys.extend(
-                    replay
-                        .iter()
-                        .enumerate()
-                        .map(|(i, c)| topk_key(c.1, i as u32)),
-                );
-                for (j, &key) in select_top_k(keys, k, sort).iter().enumerate() {
-                    let (r, wt) = replay[key_rank(key) as usize];
-                    dst_ids[j] = list[r as usize];
-                    dst_ws[j] = wt;
                 }
             }
         }

@@ -440,7 +440,6 @@ mod tests {
         to_scratch: u32,
         skip: u32,
     ) -> Vec<Option<Vec<(u32, f32)>>> {
-        let mut log = RowLog::new();
         let weight = |v: usize, x: usize| {
             if !(v + x).is_multiple_of(3) {
                 (v * T + x + 1) as f32
@@ -448,18 +447,36 @@ mod tests {
                 0.0
             }
         };
+        lists_of(visits, weight, T, simd, to_scratch, skip)
+    }
+
+    /// [`lists`] for visit weights `weight(v, x)` on a tile `cols` pixels wide: pixels past
+    /// it have no region in the output (offset 0, no entries), as at the image's edge.
+    fn lists_of(
+        visits: usize,
+        weight: impl Fn(usize, usize) -> f32,
+        cols: usize,
+        simd: ListSimd,
+        to_scratch: u32,
+        skip: u32,
+    ) -> Vec<Option<Vec<(u32, f32)>>> {
+        let mut log = RowLog::new();
         for v in 0..visits {
-            let w: [f32; T] = std::array::from_fn(|x| weight(v, x));
+            let w: [f32; T] = std::array::from_fn(|x| if x < cols { weight(v, x) } else { 0.0 });
             log.push(5, 1000 + v as u32, &w);
         }
-        let n: [usize; T] =
-            std::array::from_fn(|x| (0..visits).filter(|&v| weight(v, x) > 0.0).count());
+        let n: [usize; T] = std::array::from_fn(|x| {
+            (0..visits)
+                .filter(|&v| x < cols && weight(v, x) > 0.0)
+                .count()
+        });
         let mut off = [0usize; T];
-        for x in 1..T {
+        for x in 1..cols {
             off[x] = off[x - 1] + n[x - 1];
         }
-        let total = off[T - 1] + n[T - 1];
-        let (mut out_ids, mut out_ws) = (vec![0u32; total + T], vec![0.0f32; total + T]);
+        let total = n.iter().sum::<usize>();
+        // Filler the readers must overwrite exactly where lists go.
+        let (mut out_ids, mut out_ws) = (vec![7u32; total + T], vec![-1.0f32; total + T]);
         let mut scratch_ids = Box::new([[0u32; STRIDE]; T]);
         let mut scratch_ws = Box::new([[0.0f32; STRIDE]; T]);
         let mut dst = RowDst {
@@ -528,43 +545,18 @@ mod tests {
     #[test]
     fn pixels_without_contributions_write_nothing() {
         // A partial tile: pixels 12–15 are past the image edge (no region, offset 0), pixel 5
-        // took nothing; the other lists go to the output back to back.
+        // took nothing; the other lists lie back to back and must all come out whole.
+        let weight = |v: usize, x: usize| if x != 5 { (v + 1) as f32 } else { 0.0 };
         for simd in simds_here() {
-            let mut log = RowLog::new();
-            for v in 0..21 {
-                let w: [f32; T] = std::array::from_fn(|x| {
-                    if x < 12 && x != 5 {
-                        (v + 1) as f32
-                    } else {
-                        0.0
-                    }
-                });
-                log.push(2, v as u32, &w);
+            let got = lists_of(21, weight, 12, simd, 0, 0);
+            for (x, list) in got.iter().enumerate() {
+                let want: Vec<(u32, f32)> = if x < 12 && x != 5 {
+                    (0..21).map(|v| (1000 + v as u32, (v + 1) as f32)).collect()
+                } else {
+                    Vec::new()
+                };
+                assert_eq!(list.as_ref(), Some(&want), "{simd:?} pixel {x}");
             }
-            let n: [usize; T] = std::array::from_fn(|x| if x < 12 && x != 5 { 21 } else { 0 });
-            let mut off = [0usize; T];
-            for x in 1..12 {
-                off[x] = off[x - 1] + n[x - 1];
-            }
-            let total = 11 * 21;
-            let (mut out_ids, mut out_ws) = (vec![7u32; total + T], vec![-1.0f32; total + T]);
-            let mut scratch_ids = Box::new([[0u32; STRIDE]; T]);
-            let mut scratch_ws = Box::new([[0.0f32; STRIDE]; T]);
-            let mut dst = RowDst {
-                out_ids: &mut out_ids,
-                out_ws: &mut out_ws,
-                off,
-                n,
-                scratch_ids: &mut scratch_ids,
-                scratch_ws: &mut scratch_ws,
-                to_scratch: 0,
-                skip: 0,
-            };
-            log.write_lists(2, simd, &mut dst);
-            let want_ids: Vec<u32> = (0..11).flat_map(|_| 0..21).collect();
-            let want_ws: Vec<f32> = (0..11).flat_map(|_| (1..22).map(|v| v as f32)).collect();
-            assert_eq!(&out_ids[..total], &want_ids[..], "{simd:?}");
-            assert_eq!(&out_ws[..total], &want_ws[..], "{simd:?}");
         }
     }
 

@@ -119,18 +119,16 @@ fn label_hits(labels: &[u32; ROW_LABELS], label: u32) -> u32 {
 
 #[cfg(test)]
 mod tests {
+    use rand::{Rng, SeedableRng};
+    use rand_chacha::ChaCha8Rng;
+
     use super::*;
     use crate::voting::vote;
 
     #[test]
     fn winners_match_the_reference_vote() {
-        let mut seed = 99u64;
-        let mut rnd = move || {
-            seed = seed
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (seed >> 33) as u32
-        };
+        let mut rng = ChaCha8Rng::seed_from_u64(99);
+        let mut rnd = move || rng.gen::<u32>();
         let mut v = RowVotes::new();
         let mut sums = Vec::new();
         for case in 0..500 {
