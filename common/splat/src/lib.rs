@@ -30,6 +30,8 @@ mod raster_backward;
 mod rasterize;
 #[cfg(test)]
 mod reference;
+mod regions;
+
 mod render;
 mod row_log;
 mod row_votes;

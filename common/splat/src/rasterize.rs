@@ -5,8 +5,9 @@
 //! where the Gaussian can reach α ≥ 1/255 (exact: other pixels would skip it anyway), one
 //! 16-lane row at a time (one AVX-512 register, two AVX2 ones; a portable build too, all
 //! bit-identical). For top-K every row visit is logged (one vector of 16 weights, see
-//! `row_log`); at the end of the tile the per-pixel lists are read off the log straight into
-//! the output where a pixel's list fits in K (the usual case), else into scratch lists whose
+//! `row_log`); at the end of the tile each row's per-pixel counts, then regions in the output
+//! (`regions`), then lists are read off the log: straight into the output where a pixel's
+//! list fits in K (the usual case), else into scratch lists whose
 //! K heaviest are kept (a quickselect on lane bit masks, see `keep_heaviest`); sorted
 //! only on request. Voting keeps, per tile row, the few labels the row met and a 16-lane sum
 //! per label (`row_votes`): one vector add per row visit; rows meeting more labels are voted
@@ -25,6 +26,7 @@ use crate::blend::{alpha_of, gaussian_power, MIN_ALPHA, MIN_TRANSMITTANCE};
 use crate::keep_heaviest::{keep_heaviest, KEEP_MAX};
 use crate::output::{RenderOutput, RenderRequest};
 use crate::project::Projected;
+use crate::regions::{top_k_is_whole_list, RowRegions};
 use crate::row_log::{boxed_rows, ListSimd, PixelLists, RowDst, RowLog, LIST_CAP, STRIDE};
 use crate::row_votes::RowVotes;
 use crate::tiles::{TileGrid, TILE_SIZE};
@@ -305,7 +307,7 @@ struct TileState {
     s: [[f32; T]; T],
     last: [[u32; T]; T],
     row_live: [u32; T],
-    /// Contributions per pixel so far (lists mode).
+    /// Contributions per pixel, counted off the row log after the lane loop (lists mode).
     count: [[u32; T]; T],
 }
 
@@ -449,7 +451,6 @@ fn tile_kernel<const LISTS: bool, const VOTE: bool>(ctx: &Ctx, scratch: &mut Scr
     }
     st.last = [[0; T]; T];
     if LISTS {
-        st.count = [[0; T]; T];
         scratch.log.clear();
     }
     if VOTE {
@@ -515,10 +516,6 @@ fn tile_kernel<const LISTS: bool, const VOTE: bool>(ctx: &Ctx, scratch: &mut Scr
                 scratch.row_votes.add(ly, label, &w);
             }
             if LISTS {
-                // w > 0 exactly where a lane contributed.
-                for (c, &wi) in st.count[ly].iter_mut().zip(&w) {
-                    *c += (wi > 0.0) as u32;
-                }
                 scratch.log.push(ly, gid, &w);
             }
             contributed = true;
@@ -696,13 +693,6 @@ fn has_list(log: &RowLog, y: usize, n: usize, k: usize, sort: bool) -> bool {
     !log.overflowed(y) && (n <= LIST_CAP || top_k_is_whole_list(n, k, sort))
 }
 
-/// Whether a pixel's top-K is its whole list in front-to-back order (written straight from
-/// the row log into the band store), rather than chosen or sorted from a scratch list.
-#[inline(always)]
-fn top_k_is_whole_list(n: usize, k: usize, sort: bool) -> bool {
-    n <= k && (!sort || n <= 1)
-}
-
 /// Where a finished tile's full per-pixel contribution lists are, after [`build_top_k`].
 struct ListsOfTile<'a> {
     st: &'a TileState,
@@ -819,38 +809,17 @@ fn build_top_k(
         ..
     } = scratch;
     let at0 = band.topk_len;
-    let mut total = 0usize;
-    for (y, counts) in st.count.iter().enumerate().take(rows) {
-        let o = y * w + x0;
-        let (start, count) = (&mut start[o..o + cols], &mut count[o..o + cols]);
-        for ((s, c), &n) in start.iter_mut().zip(count.iter_mut()).zip(counts) {
-            let m = (n as usize).min(k);
-            *s = (at0 + total) as u32;
-            *c = m as u16;
-            total += m;
-        }
-    }
-    // The store keeps last frame's length: grow only (no per-frame memset); the band
-    // truncates it to what it used when done. The list readers may store T entries past
-    // the tile's last list.
-    if store.ids.len() < at0 + total + T {
-        store.ids.resize(at0 + total + T, 0);
-        store.weights.resize(at0 + total + T, 0.0);
-    }
-    band.topk_len += total;
-
+    // k ≤ u16::MAX (clamped by the caller), so no sum of a row's entries wraps.
+    let k32 = k.min(u16::MAX as usize) as u32;
     let simd = ctx.simd.lists();
     #[cfg(target_arch = "x86_64")]
     let avx512 = ctx.simd == Simd::Avx512;
     #[cfg(not(target_arch = "x86_64"))]
     let avx512 = false;
-    let (out_ids, out_ws) = (
-        &mut store.ids[at0..at0 + total + T],
-        &mut store.weights[at0..at0 + total + T],
-    );
     // Per row, the pixels whose top-K is not written by the list read-off: chosen from the
     // scratch lists, or replayed (all pixels with contributions, where the log overflowed).
     let mut later = [0u32; T];
+    // Entries of the tile's rows so far: each row's regions follow the previous row's.
     let mut off = 0usize;
     for (y, (scratch_ids, scratch_ws)) in scratch_ids
         .iter_mut()
@@ -858,38 +827,58 @@ fn build_top_k(
         .enumerate()
         .take(rows)
     {
-        let mut dst = RowDst {
-            out_ids: &mut *out_ids,
-            out_ws: &mut *out_ws,
-            off: [0; T],
-            n: [0; T],
-            scratch_ids,
-            scratch_ws,
-            to_scratch: 0,
-            skip: 0,
-        };
-        for x in 0..cols {
-            let n = st.count[y][x] as usize;
-            dst.off[x] = off;
-            dst.n[x] = n;
-            off += n.min(k);
-            if !top_k_is_whole_list(n, k, sort) {
-                if n <= LIST_CAP {
-                    dst.to_scratch |= 1 << x;
-                } else {
-                    dst.skip |= 1 << x;
-                }
-            }
-        }
-        if !log.overflowed(y) {
-            log.write_lists(y, simd, &mut dst);
-            later[y] = dst.to_scratch | dst.skip;
+        let listed = !log.overflowed(y);
+        st.count[y] = if listed {
+            log.counts(y, simd)
         } else {
-            for x in 0..cols {
-                later[y] |= ((dst.n[x] > 0) as u32) << x;
+            // Too many visits to log: the row's lists are replayed, here only to count them.
+            std::array::from_fn(|x| {
+                if x < cols {
+                    let (px, py) = ((x0 + x) as u32, (band.band * T + y) as u32);
+                    replay_pixel(ctx.projected, list, px, py, replay);
+                    replay.len() as u32
+                } else {
+                    0
+                }
+            })
+        };
+        let counts = &st.count[y];
+        let r = RowRegions::new(counts, k32, sort);
+        let o = y * w + x0;
+        let base = at0 + off;
+        for x in 0..cols {
+            start[o + x] = base as u32 + r.before[x];
+            count[o + x] = r.kept[x] as u16;
+        }
+        // The store keeps last frame's length: grow only (no per-frame memset); the band
+        // truncates it to what it used when done. The list readers may store T entries past
+        // the row's last list.
+        let end = base + r.total as usize + T;
+        if store.ids.len() < end {
+            store.ids.resize(end, 0);
+            store.weights.resize(end, 0.0);
+        }
+        off += r.total as usize;
+        if listed {
+            let mut dst = RowDst {
+                out_ids: &mut store.ids[base..end],
+                out_ws: &mut store.weights[base..end],
+                off: std::array::from_fn(|x| r.before[x] as usize),
+                n: std::array::from_fn(|x| counts[x] as usize),
+                scratch_ids,
+                scratch_ws,
+                to_scratch: r.to_scratch,
+                skip: r.skip,
+            };
+            log.write_lists(y, simd, &mut dst);
+            later[y] = r.to_scratch | r.skip;
+        } else {
+            for (x, &n) in counts.iter().enumerate() {
+                later[y] |= ((n > 0) as u32) << x;
             }
         }
     }
+    band.topk_len += off;
 
     for (y, &row) in later.iter().enumerate().take(rows) {
         let mut xs = row;

@@ -554,3 +554,51 @@ fn rows_meeting_many_labels_are_voted_exactly() {
         }
     }
 }
+
+#[test]
+fn rows_with_more_visits_than_the_log_holds_are_replayed() {
+    // 1100 faint, wide Gaussians stacked on pixel (40, 24): the tile rows around it are
+    // visited more often than a row log holds, so their lists are counted and built by
+    // replaying each pixel. α ≈ 0.004 keeps T ≈ e^-4.4 above the cut-off throughout.
+    let gs: Vec<Gaussian> = (0..1100)
+        .map(|i| {
+            let z = 2.0 + 0.001 * i as f32;
+            let mut g = blob(z, 0.05, 0.004, [0.3, 0.6, 0.9], 1 + i as u32 % 5);
+            g.mean = [z * 8.0 / 100.0, 0.0, z];
+            g
+        })
+        .collect();
+    let map = map_of(&gs);
+    let cam = camera(0.05);
+    let slow = render_reference(&map, &cam, 50);
+    let seen = render(&map, &cam, &RenderRequest::color_depth());
+    assert!(
+        seen.pixel_contributions(40, 24).len() > crate::row_log::ROW_CAP,
+        "the centre row should overflow its log"
+    );
+    for req in [
+        RenderRequest::semantic(50),
+        RenderRequest::semantic_sorted(50),
+    ] {
+        for portable in [false, true] {
+            crate::rasterize::force_portable(portable);
+            let o = render(&map, &cam, &req).output;
+            crate::rasterize::force_portable(false);
+            assert_eq!(o.labels.as_ref().expect("asked"), &slow.labels, "{req:?}");
+            let tk = o.top_k.as_ref().expect("asked");
+            for y in 0..48 {
+                for x in 0..64 {
+                    let (ids, ws) = tk.pixel(x, y);
+                    let mut got: Vec<(u32, f32)> =
+                        ids.iter().copied().zip(ws.iter().copied()).collect();
+                    let mut want = slow.top_k[(y * 64 + x) as usize].clone();
+                    if !req.sort_top_k {
+                        got.sort_by_key(|e| e.0);
+                        want.sort_by_key(|e| e.0);
+                    }
+                    assert_eq!(got, want, "{req:?} portable {portable} pixel ({x}, {y})");
+                }
+            }
+        }
+    }
+}
