@@ -475,6 +475,7 @@ fn tile_kernel<const LISTS: bool, const VOTE: bool>(ctx: &Ctx, scratch: &mut Scr
             rank1: rank as u32 + 1,
         };
         let label = if VOTE { ctx.labels[gi] } else { 0 };
+        let vote_visits = VOTE && scratch.row_votes.per_visit(label, &st.s);
         let e = p.ellipses[gi];
         let [a, b, c] = g.conic;
         let disc = b * b - a * c;
@@ -512,7 +513,7 @@ fn tile_kernel<const LISTS: bool, const VOTE: bool>(ctx: &Ctx, scratch: &mut Scr
             if !any {
                 continue;
             }
-            if VOTE && label != 0 {
+            if vote_visits && label != 0 {
                 scratch.row_votes.add(ly, label, &w);
             }
             if LISTS {
@@ -660,6 +661,17 @@ fn write_tile<const LISTS: bool, const VOTE: bool>(
                 store: band.topk_band.as_deref(),
                 start: band.topk_start.as_deref(),
             };
+            if let Some(l) = row_votes.uniform() {
+                // Every contributing Gaussian carried label l (weights are positive, so a
+                // pixel took something exactly where its silhouette is above 0).
+                for y in 0..rows {
+                    let row = &mut labels[y * w + x0..][..cols];
+                    for (label, &s) in row.iter_mut().zip(&st.s[y]) {
+                        *label = if s > 0.0 { l } else { 0 };
+                    }
+                }
+                return;
+            }
             for y in 0..rows {
                 let row = &mut labels[y * w + x0..][..cols];
                 if !row_votes.overflowed(y) {

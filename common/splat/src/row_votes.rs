@@ -21,6 +21,10 @@ pub(crate) struct RowVotes {
     sum: [[[f32; T]; ROW_LABELS]; T],
     /// Bit y: row y met more than ROW_LABELS labels.
     overflow: u32,
+    /// The one real label every Gaussian of the tile so far carried, while voting waits.
+    uniform: Option<u32>,
+    /// Whether visits are voted one by one (a second label, or label 0, came).
+    per_visit: bool,
 }
 
 impl RowVotes {
@@ -30,6 +34,8 @@ impl RowVotes {
             used: [0; T],
             sum: [[[0.0; T]; ROW_LABELS]; T],
             overflow: 0,
+            uniform: None,
+            per_visit: false,
         }
     }
 
@@ -38,6 +44,45 @@ impl RowVotes {
     pub fn clear(&mut self) {
         self.used = [0; T];
         self.overflow = 0;
+        self.uniform = None;
+        self.per_visit = false;
+    }
+
+    /// Called for each Gaussian of the tile, in list order, before it composites: whether its
+    /// visits must be [added](RowVotes::add) one by one. While every Gaussian so far carries
+    /// one real label L, each pixel's sum for L is its silhouette so far (the same adds of the
+    /// same weights, in the same order), so nothing is voted per visit; the first Gaussian of
+    /// another label (or label 0) starts every row's table with L and its silhouette.
+    #[inline(always)]
+    pub fn per_visit(&mut self, label: u32, silhouette: &[[f32; T]; T]) -> bool {
+        if self.per_visit || self.uniform == Some(label) {
+            return self.per_visit;
+        }
+        match self.uniform {
+            None if label != 0 => {
+                self.uniform = Some(label);
+                return false;
+            }
+            Some(l) => {
+                for (y, s) in silhouette.iter().enumerate() {
+                    if s.iter().any(|&v| v > 0.0) {
+                        self.label[y][0] = l;
+                        self.sum[y][0] = *s;
+                        self.used[y] = 1;
+                    }
+                }
+            }
+            None => {}
+        }
+        self.per_visit = true;
+        true
+    }
+
+    /// While no visit was voted one by one: the label every contributing Gaussian of the tile
+    /// carried (pixels that took anything vote it), or 0 for a tile that met none.
+    #[inline(always)]
+    pub fn uniform(&self) -> Option<u32> {
+        (!self.per_visit).then_some(self.uniform.unwrap_or(0))
     }
 
     /// Adds a visit of a Gaussian with real label `label` (≠ 0) to row `y`: weights `w`,

@@ -602,3 +602,54 @@ fn rows_with_more_visits_than_the_log_holds_are_replayed() {
         }
     }
 }
+
+#[test]
+fn tiles_of_one_label_vote_it_without_sums_and_switch_exactly() {
+    // A front layer of label 5 above row 40; behind it, label 9 on the right half (heavier
+    // than the front where both are: it switches those tiles to summing mid-list, from the
+    // silhouette so far), label 0 on the bottom rows, and one label-0 blob in front at the
+    // top left (its tile sums from the first Gaussian). Tiles elsewhere stay uniform; the
+    // bottom rows took only label 0 and vote 0.
+    let mut gs = Vec::new();
+    let mut layer = |z: f32, opacity: f32, label: u32, keep: &dyn Fn(f32, f32) -> bool| {
+        for py in (2..48).step_by(4) {
+            for px in (2..64).step_by(4) {
+                let (px, py) = (px as f32, py as f32);
+                if keep(px, py) {
+                    let mut g = blob(z, 0.03, opacity, [0.4, 0.5, 0.6], label);
+                    g.mean = [z * (px - 32.0) / 100.0, z * (py - 24.0) / 100.0, z];
+                    gs.push(g);
+                }
+            }
+        }
+    };
+    layer(1.5, 0.5, 0, &|px, py| px < 12.0 && py < 12.0);
+    layer(2.0, 0.3, 5, &|_, py| py < 40.0);
+    layer(2.5, 0.9, 9, &|px, _| px >= 32.0);
+    layer(3.0, 0.9, 0, &|_, py| py >= 32.0);
+    let map = map_of(&gs);
+    let cam = camera(0.05);
+    let slow = render_reference(&map, &cam, 50);
+    let labels: std::collections::BTreeSet<u32> = slow.labels.iter().copied().collect();
+    assert_eq!(labels, [0, 5, 9].into(), "the scene should vote 0, 5 and 9");
+    let only_labels = RenderRequest {
+        labels: true,
+        ..RenderRequest::default()
+    };
+    for req in [
+        only_labels,
+        RenderRequest::semantic(50),
+        RenderRequest::semantic_sorted(50),
+    ] {
+        for portable in [false, true] {
+            crate::rasterize::force_portable(portable);
+            let o = render(&map, &cam, &req).output;
+            crate::rasterize::force_portable(false);
+            assert_eq!(
+                o.labels.as_ref().expect("asked"),
+                &slow.labels,
+                "{req:?} {portable}"
+            );
+        }
+    }
+}
