@@ -142,9 +142,22 @@ macro_rules! keep_heaviest_in_registers {
             let masks = |p: f32| -> ($mask, $mask) {
                 let pv = _mm512_set1_ps(p);
                 let (mut above, mut equal): ($mask, $mask) = (0, 0);
-                for (q, &vq) in v.iter().enumerate() {
-                    above |= (_mm512_cmp_ps_mask::<_CMP_GT_OQ>(vq, pv) as $mask) << (16 * q);
-                    equal |= (_mm512_cmp_ps_mask::<_CMP_EQ_OQ>(vq, pv) as $mask) << (16 * q);
+                // Four 16-lane masks joined in mask registers (kunpack), one move out per 64.
+                for (q, v4) in v.chunks_exact(4).enumerate() {
+                    let join = |c: [u16; 4]| {
+                        _mm512_kunpackd(
+                            _mm512_kunpackw(c[3] as u32, c[2] as u32) as u64,
+                            _mm512_kunpackw(c[1] as u32, c[0] as u32) as u64,
+                        )
+                    };
+                    let gt = join(std::array::from_fn(|i| {
+                        _mm512_cmp_ps_mask::<_CMP_GT_OQ>(v4[i], pv)
+                    }));
+                    let eq = join(std::array::from_fn(|i| {
+                        _mm512_cmp_ps_mask::<_CMP_EQ_OQ>(v4[i], pv)
+                    }));
+                    above |= (gt as $mask) << (64 * q);
+                    equal |= (eq as $mask) << (64 * q);
                 }
                 (above, equal)
             };
