@@ -7,11 +7,12 @@
 //! bit-identical). For top-K every row visit is logged (one vector of 16 weights, see
 //! `row_log`); at the end of the tile each row's per-pixel counts, then regions in the output
 //! (`regions`), then lists are read off the log: straight into the output where a pixel's
-//! list fits in K (the usual case), else into scratch lists whose
-//! K heaviest are kept (a quickselect on lane bit masks, see `keep_heaviest`); sorted
-//! only on request. Voting keeps, per tile row, the few labels the row met and a 16-lane sum
-//! per label (`row_votes`): one vector add per row visit; rows meeting more labels are voted
-//! exactly at the end of the tile, from their pixels' lists or a replay.
+//! list fits in K (the usual case), else into scratch lists whose K heaviest are kept (a
+//! quickselect on lane bit masks, see `keep_heaviest`); sorted only on request. Voting
+//! (`row_votes`) costs nothing per visit while every Gaussian of the tile carries one label
+//! (the silhouette is then that label's sum); after that each tile row keeps the few labels
+//! it met and a 16-lane sum per label: one vector add per row visit; rows meeting more
+//! labels are voted exactly at the end of the tile, from their pixels' lists or a replay.
 //! Bands of 16 image rows run in parallel (rayon) with per-thread scratch kept across
 //! frames; one kernel is compiled per combination of requested outputs and per SIMD level.
 
