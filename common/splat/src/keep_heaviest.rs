@@ -134,11 +134,11 @@ macro_rules! keep_heaviest_in_registers {
             assert!(ws.len() >= LANES && n <= LANES);
             let mut v = [_mm512_setzero_ps(); $q];
             for (q, vq) in v.iter_mut().enumerate() {
-                // SAFETY: ws holds LANES lanes (checked). (A plain loop: a closure would not
-                // take the features.)
+                // SAFETY: ws holds LANES lanes (checked).
                 *vq = unsafe { _mm512_loadu_ps(ws.as_ptr().add(16 * q)) };
             }
-            // The lanes above p, and equal to it (a plain loop, inlined with the features).
+            // The lanes above p, and equal to it. (These closures are inlined into this
+            // function, features and all: measured as fast as the plain code they replaced.)
             let masks = |p: f32| -> ($mask, $mask) {
                 let pv = _mm512_set1_ps(p);
                 let (mut above, mut equal): ($mask, $mask) = (0, 0);
