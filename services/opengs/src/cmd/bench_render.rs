@@ -1,5 +1,6 @@
 //! `opengs bench-render`: the renderer benchmark (median ms per frame) on synthetic scenes.
 
+use anyhow::Context;
 use opengs_splat::args;
 use opengs_splat::bench::{run_render_bench, BenchConfig};
 
@@ -16,6 +17,13 @@ pub struct BenchRenderArgs {
     /// median of per-frame ratios and a busy machine slows all columns alike.
     #[arg(long, default_value_t = 9)]
     pub frames: usize,
+    /// Renders of each frame per request, the fastest kept: steadier figures on a shared
+    /// machine (slow spells only ever add time). Try 5 when comparing two builds.
+    #[arg(long, default_value_t = 1)]
+    pub repeat: usize,
+    /// Worker threads (default: all cores). 1 shows the per-core cost without scheduling.
+    #[arg(long)]
+    pub threads: Option<usize>,
     /// K of the per-pixel top-K.
     #[arg(long, default_value_t = 50)]
     pub top_k: usize,
@@ -26,6 +34,8 @@ pub struct BenchRenderArgs {
 
 pub fn run(args: BenchRenderArgs) -> anyhow::Result<()> {
     anyhow::ensure!(args.frames > 0, "--frames must be at least 1");
+    anyhow::ensure!(args.repeat > 0, "--repeat must be at least 1");
+    anyhow::ensure!(args.threads != Some(0), "--threads must be at least 1");
     anyhow::ensure!(args.top_k > 0, "--top-k must be at least 1");
     anyhow::ensure!(
         args.gaussians.iter().all(|&n| n > 0),
@@ -39,9 +49,18 @@ pub fn run(args: BenchRenderArgs) -> anyhow::Result<()> {
             .map(|&(w, h)| opengs_splat::bench::intrinsics_for_size(w, h))
             .collect(),
         frames: args.frames,
+        repeat: args.repeat,
         top_k: args.top_k,
         breakdown: args.breakdown,
     };
-    print!("{}", run_render_bench(&cfg));
+    let report = match args.threads {
+        Some(n) => rayon::ThreadPoolBuilder::new()
+            .num_threads(n)
+            .build()
+            .context("cannot start the worker threads")?
+            .install(|| run_render_bench(&cfg)),
+        None => run_render_bench(&cfg),
+    };
+    print!("{report}");
     Ok(())
 }
