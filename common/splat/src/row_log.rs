@@ -1,11 +1,12 @@
 //! Contribution log of one tile: every row visit (a Gaussian compositing onto some pixels of
 //! a 16-pixel tile row) as one vector of 16 weights (0 where a pixel took nothing) and the
 //! Gaussian's id, in front-to-back order. The lane loop logs with one vector store per visit;
-//! the per-pixel lists (the top-K's input) are read off the log once the tile is done, with
-//! transposes in registers (16×16 on AVX-512, written back over the log; 8×8 on AVX2; a
-//! column walk in portable code).
+//! the per-pixel counts and lists (the top-K's input) are read off the log once the tile is
+//! done, with transposes in registers (16×16 on AVX-512, written back over the log, the
+//! counts taken on the way; 8×8 on AVX2; a column walk in portable code).
 //! Appending to 16 per-pixel lists during the lane loop instead (16 scattered stores per
-//! visit) was the top-K's largest cost.
+//! visit) was the top-K's largest cost; a scatter per visit, or a walk over each visit's
+//! lanes, measured 2.4× and 2× the transposes.
 
 use crate::tiles::TILE_SIZE;
 
