@@ -31,7 +31,6 @@ mod rasterize;
 #[cfg(test)]
 mod reference;
 mod regions;
-
 mod render;
 mod row_log;
 mod row_votes;

@@ -654,14 +654,6 @@ fn write_tile<const LISTS: bool, const VOTE: bool>(
                 replay,
                 ..
             } = scratch;
-            let lists = ListsOfTile {
-                st,
-                log,
-                ids,
-                ws,
-                store: band.topk_band.as_deref(),
-                start: band.topk_start.as_deref(),
-            };
             if let Some(l) = row_votes.uniform() {
                 // Every contributing Gaussian carried label l (weights are positive, so a
                 // pixel took something exactly where its silhouette is above 0).
@@ -673,6 +665,14 @@ fn write_tile<const LISTS: bool, const VOTE: bool>(
                 }
                 return;
             }
+            let lists = ListsOfTile {
+                st,
+                log,
+                ids,
+                ws,
+                store: band.topk_band.as_deref(),
+                start: band.topk_start.as_deref(),
+            };
             for y in 0..rows {
                 let row = &mut labels[y * w + x0..][..cols];
                 if !row_votes.overflowed(y) {

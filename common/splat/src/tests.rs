@@ -5,7 +5,7 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
 use crate::map::{Gaussian, GaussianMap};
-use crate::output::RenderRequest;
+use crate::output::{RenderOutput, RenderRequest};
 use crate::reference::render_reference;
 use crate::render::render;
 use crate::Camera;
@@ -36,6 +36,33 @@ fn map_of(gs: &[Gaussian]) -> GaussianMap {
         m.push(*g);
     }
     m
+}
+
+/// Labels only, then the semantic requests with top-K `k`, unsorted and sorted.
+fn label_requests(k: usize) -> [RenderRequest; 3] {
+    let only_labels = RenderRequest {
+        labels: true,
+        ..RenderRequest::default()
+    };
+    [
+        only_labels,
+        RenderRequest::semantic(k),
+        RenderRequest::semantic_sorted(k),
+    ]
+}
+
+/// `req` rendered on this CPU's SIMD kernels, then on the portable ones: (portable, output).
+fn render_on_both_kernels(
+    map: &GaussianMap,
+    cam: &Camera,
+    req: &RenderRequest,
+) -> [(bool, RenderOutput); 2] {
+    [false, true].map(|portable| {
+        crate::rasterize::force_portable(portable);
+        let o = render(map, cam, req).output;
+        crate::rasterize::force_portable(false);
+        (portable, o)
+    })
 }
 
 fn close(a: f32, b: f32, tol: f32) -> bool {
@@ -130,19 +157,8 @@ fn voting_goes_per_pixel_when_a_tile_meets_a_second_label() {
     ]);
     let cam = camera(0.05);
     let slow = render_reference(&map, &cam, 50);
-    let only_labels = RenderRequest {
-        labels: true,
-        ..RenderRequest::default()
-    };
-    for req in [
-        RenderRequest::semantic(50),
-        RenderRequest::semantic_sorted(50),
-        only_labels,
-    ] {
-        for portable in [false, true] {
-            crate::rasterize::force_portable(portable);
-            let o = render(&map, &cam, &req).output;
-            crate::rasterize::force_portable(false);
+    for req in label_requests(50) {
+        for (portable, o) in render_on_both_kernels(&map, &cam, &req) {
             let labels = o.labels.as_ref().expect("asked");
             assert_eq!(labels[o.index(34, 24)], 3);
             assert_eq!(labels[o.index(32, 24)], 4);
@@ -533,19 +549,8 @@ fn rows_meeting_many_labels_are_voted_exactly() {
         }
     }
     assert!(crowded > 0, "the scene should crowd some rows with labels");
-    let only_labels = RenderRequest {
-        labels: true,
-        ..RenderRequest::default()
-    };
-    for req in [
-        only_labels,
-        RenderRequest::semantic(8),
-        RenderRequest::semantic_sorted(8),
-    ] {
-        for portable in [false, true] {
-            crate::rasterize::force_portable(portable);
-            let o = render(&map, &cam, &req).output;
-            crate::rasterize::force_portable(false);
+    for req in label_requests(8) {
+        for (portable, o) in render_on_both_kernels(&map, &cam, &req) {
             assert_eq!(
                 o.labels.as_ref().expect("asked"),
                 &slow.labels,
@@ -582,10 +587,7 @@ fn stack_matches_reference(count: usize) {
         RenderRequest::semantic(50),
         RenderRequest::semantic_sorted(50),
     ] {
-        for portable in [false, true] {
-            crate::rasterize::force_portable(portable);
-            let o = render(&map, &cam, &req).output;
-            crate::rasterize::force_portable(false);
+        for (portable, o) in render_on_both_kernels(&map, &cam, &req) {
             assert_eq!(o.labels.as_ref().expect("asked"), &slow.labels, "{req:?}");
             let tk = o.top_k.as_ref().expect("asked");
             for y in 0..48 {
@@ -634,19 +636,8 @@ fn tiles_of_one_label_vote_it_without_sums_and_switch_exactly() {
     let slow = render_reference(&map, &cam, 50);
     let labels: std::collections::BTreeSet<u32> = slow.labels.iter().copied().collect();
     assert_eq!(labels, [0, 5, 9].into(), "the scene should vote 0, 5 and 9");
-    let only_labels = RenderRequest {
-        labels: true,
-        ..RenderRequest::default()
-    };
-    for req in [
-        only_labels,
-        RenderRequest::semantic(50),
-        RenderRequest::semantic_sorted(50),
-    ] {
-        for portable in [false, true] {
-            crate::rasterize::force_portable(portable);
-            let o = render(&map, &cam, &req).output;
-            crate::rasterize::force_portable(false);
+    for req in label_requests(50) {
+        for (portable, o) in render_on_both_kernels(&map, &cam, &req) {
             assert_eq!(
                 o.labels.as_ref().expect("asked"),
                 &slow.labels,
