@@ -21,7 +21,7 @@ pub fn select_counter_gaussians(
     let mut selected = Vec::new();
     for region in regions {
         for &p in &region.pixels {
-            for &id in top_k.gaussians_at(p as usize) {
+            for id in top_k.gaussians_at(p as usize) {
                 // Validated above: every id indexes `labels`.
                 if labels[id as usize] == region.label && max_scale(id as usize) > theta {
                     selected.push(id);

@@ -7,8 +7,8 @@ use crate::output::RelabelInstruction;
 pub trait TopK {
     /// Number of pixels covered.
     fn pixel_count(&self) -> usize;
-    /// Gaussian ids recorded at `pixel` (empty when out of range).
-    fn gaussians_at(&self, pixel: usize) -> &[u32];
+    /// Gaussian ids recorded at `pixel` (none when out of range).
+    fn gaussians_at(&self, pixel: usize) -> impl Iterator<Item = u32> + '_;
 }
 
 /// Flat top-K record: `k` slots per pixel in `ids`, of which the first `counts[p]` are used.
@@ -47,12 +47,15 @@ impl<C: Copy + Into<usize>> TopK for TopKView<'_, C> {
         self.counts.len()
     }
 
-    fn gaussians_at(&self, pixel: usize) -> &[u32] {
-        let Some(&count) = self.counts.get(pixel) else {
-            return &[];
+    fn gaussians_at(&self, pixel: usize) -> impl Iterator<Item = u32> + '_ {
+        let ids = match self.counts.get(pixel) {
+            Some(&count) => {
+                let start = pixel * self.k;
+                self.ids.get(start..start + count.into()).unwrap_or(&[])
+            }
+            None => &[],
         };
-        let start = pixel * self.k;
-        self.ids.get(start..start + count.into()).unwrap_or(&[])
+        ids.iter().copied()
     }
 }
 
@@ -69,10 +72,9 @@ pub fn validate_regions<'p>(
             if p as usize >= pixels {
                 return Err(SemanticsError::PixelOutOfRange { pixel: p, pixels });
             }
-            if let Some(&id) = top_k
+            if let Some(id) = top_k
                 .gaussians_at(p as usize)
-                .iter()
-                .find(|&&id| id as usize >= gaussians)
+                .find(|&id| id as usize >= gaussians)
             {
                 return Err(SemanticsError::GaussianOutOfRange { id, gaussians });
             }
@@ -97,7 +99,7 @@ pub fn apply_relabels(
     let mut changed = 0;
     for instruction in relabels {
         for &p in &instruction.pixels {
-            for &id in top_k.gaussians_at(p as usize) {
+            for id in top_k.gaussians_at(p as usize) {
                 let label = &mut labels[id as usize]; // in range: validated above
                 if *label == instruction.from && instruction.from != instruction.to {
                     *label = instruction.to;

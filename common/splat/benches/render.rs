@@ -1,7 +1,7 @@
 //! `cargo bench -p opengs-splat`: prints the render benchmark table.
 //! `cargo bench -p opengs-splat -- stages` prints a per-stage breakdown at 100k, 640×480.
 //! `cargo bench -p opengs-splat -- quick` times only the issue-4 case (100k, 640×480).
-//! `cargo bench -p opengs-splat -- loop N [a|labels|topk|sorted|unsorted]` renders case (b) (or the named
+//! `cargo bench -p opengs-splat -- loop N [a|labels|topk]` renders case (b) (or the named
 //! variant) N times, for a profiler.
 
 use opengs_splat::bench::{run_render_bench, stage_breakdown, BenchConfig};
@@ -16,17 +16,12 @@ fn main() {
             labels,
             top_k,
             visible_counts,
-            sort_top_k: true,
         };
         for req in [
             RenderRequest::color_depth(),
             only(false, None, true),
             only(true, None, false),
             only(false, Some(50), false),
-            RenderRequest {
-                sort_top_k: false,
-                ..RenderRequest::semantic(50)
-            },
             RenderRequest::semantic(50),
         ] {
             let mut out = opengs_splat::RenderOutput::default();
@@ -44,10 +39,6 @@ fn main() {
         let cam = Camera::from_pose(k, &scene::indoor_poses(1)[0], 0.05);
         let req = match args.get(i + 2).map(String::as_str) {
             Some("a") => RenderRequest::color_depth(),
-            Some("sorted") => RenderRequest {
-                sort_top_k: true,
-                ..RenderRequest::semantic(50)
-            },
             Some("labels") => RenderRequest {
                 labels: true,
                 ..RenderRequest::default()
@@ -55,10 +46,6 @@ fn main() {
             Some("topk") => RenderRequest {
                 top_k: Some(50),
                 ..RenderRequest::default()
-            },
-            Some("unsorted") => RenderRequest {
-                sort_top_k: false,
-                ..RenderRequest::semantic(50)
             },
             _ => RenderRequest::semantic(50),
         };

@@ -4,40 +4,29 @@
 /// Longest list [`keep_heaviest`] takes (its lane masks are four 64-bit words).
 pub const KEEP_MAX: usize = 256;
 
-/// Writes the `dst.len()` heaviest of the `n` contributions `(ids, ws)` (front to back, ties
-/// to the front one) into `dst`, in their front-to-back order. `ws` holds positive weights
-/// and is padded with zeros to a multiple of 64 (at most [`KEEP_MAX`]).
+/// The lanes (bit i of word i / 64: entry i) of the `m` heaviest of the `n` contributions
+/// `ws` (front to back, ties to the front one), 1 ≤ m < n. `ws` holds positive weights and is
+/// padded with zeros to a multiple of 64 (at most [`KEEP_MAX`]). A mask rather than the
+/// entries: the renderer unmarks the few dropped ones where they are.
 ///
 /// Quickselect on the weights with the candidates as lane bit masks: each step is two
 /// branch-free compares over the list (vector compares on SIMD builds) and a few popcounts,
 /// and a step leaves about half the candidates; much cheaper for the few dozen entries of a
 /// pixel than sorting keys (`select_nth_unstable`'s data-dependent branches mispredict).
 #[inline(always)]
-pub fn keep_heaviest(
-    ids: &[u32],
-    ws: &[f32],
-    n: usize,
-    dst_ids: &mut [u32],
-    dst_ws: &mut [f32],
-    avx512: bool,
-) {
-    let m = dst_ids.len();
+pub fn keep_heaviest(ws: &[f32], n: usize, m: usize, avx512: bool) -> [u64; 4] {
     #[cfg(target_arch = "x86_64")]
     if avx512 && n <= 128 {
         let lanes = n.div_ceil(64) * 64;
-        assert!(
-            ids.len() >= lanes && ws.len() >= lanes,
-            "keep_heaviest: lists not padded"
-        );
-        // SAFETY: the caller says the CPU has AVX-512 F and BW; both lists hold the lanes.
-        unsafe {
+        assert!(ws.len() >= lanes, "keep_heaviest: list not padded");
+        // SAFETY: the caller says the CPU has AVX-512 F and BW; the list holds the lanes.
+        return unsafe {
             if n <= 64 {
-                keep_heaviest_64_avx512(ids, ws, n, dst_ids, dst_ws)
+                keep_heaviest_64_avx512(ws, n, m)
             } else {
-                keep_heaviest_128_avx512(ids, ws, n, dst_ids, dst_ws)
+                keep_heaviest_128_avx512(ws, n, m)
             }
         };
-        return;
     }
     let nw = n.div_ceil(64);
     debug_assert!(m >= 1 && m < n && n <= KEEP_MAX && ws.len() >= 64 * nw);
@@ -88,25 +77,7 @@ pub fn keep_heaviest(
             ties -= 1;
         }
     }
-    #[cfg(target_arch = "x86_64")]
-    if avx512 {
-        assert!(ids.len() >= 64 * nw, "keep_heaviest: ids not padded");
-        // SAFETY: the caller says the CPU has AVX-512 F and BW; ids and ws hold 64·nw lanes.
-        unsafe { emit_kept_avx512(ids, ws, &keep, nw, dst_ids, dst_ws) };
-        return;
-    }
-    let mut j = 0;
-    for (b, &word) in keep.iter().enumerate().take(nw) {
-        let mut k = word;
-        while k != 0 {
-            let i = 64 * b + k.trailing_zeros() as usize;
-            dst_ids[j] = ids[i];
-            dst_ws[j] = ws[i];
-            j += 1;
-            k &= k - 1;
-        }
-    }
-    debug_assert_eq!(j, m);
+    keep
 }
 
 /// Defines `$name`: [`keep_heaviest`] for lists of at most 16·$q lanes on AVX-512, with the
@@ -116,21 +87,14 @@ pub fn keep_heaviest(
 macro_rules! keep_heaviest_in_registers {
     ($name:ident, $mask:ty, $q:literal) => {
         /// # Safety
-        /// The CPU must support AVX-512 F and BW, and POPCNT; `ids` and `ws` must hold at
-        /// least 16·Q lanes.
+        /// The CPU must support AVX-512 F and BW, and POPCNT; `ws` must hold at least 16·Q
+        /// lanes.
         #[cfg(target_arch = "x86_64")]
         #[target_feature(enable = "avx512f,avx512bw,popcnt")]
         #[inline]
-        unsafe fn $name(
-            ids: &[u32],
-            ws: &[f32],
-            n: usize,
-            dst_ids: &mut [u32],
-            dst_ws: &mut [f32],
-        ) {
+        unsafe fn $name(ws: &[f32], n: usize, m: usize) -> [u64; 4] {
             use std::arch::x86_64::*;
             const LANES: usize = 16 * $q;
-            let m = dst_ids.len();
             assert!(ws.len() >= LANES && n <= LANES);
             let mut v = [_mm512_setzero_ps(); $q];
             for (q, vq) in v.iter_mut().enumerate() {
@@ -192,9 +156,7 @@ macro_rules! keep_heaviest_in_registers {
                 equal &= equal - 1;
                 ties -= 1;
             }
-            let words = [keep as u64, ((keep as u128) >> 64) as u64, 0, 0];
-            // SAFETY: the CPU has AVX-512 F (caller), both lists hold LANES lanes.
-            unsafe { emit_kept_avx512(ids, ws, &words, LANES / 64, dst_ids, dst_ws) };
+            [keep as u64, ((keep as u128) >> 64) as u64, 0, 0]
         }
     };
 }
@@ -218,54 +180,6 @@ fn lanes_above_equal(block: &[f32; 64], p: f32, avx512: bool) -> (u64, u64) {
         equal |= ((w == p) as u64) << i;
     }
     (above, equal)
-}
-
-/// Writes the lanes set in `keep` (exactly `dst_ids.len()` of them) of `ids` and `ws`, in
-/// order, with compresses and masked stores.
-///
-/// # Safety
-/// The CPU must support AVX-512 F; `ids` and `ws` must hold at least 64·nw lanes.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx512f,popcnt")]
-#[inline]
-unsafe fn emit_kept_avx512(
-    ids: &[u32],
-    ws: &[f32],
-    keep: &[u64; 4],
-    nw: usize,
-    dst_ids: &mut [u32],
-    dst_ws: &mut [f32],
-) {
-    use std::arch::x86_64::*;
-    let total: u32 = keep[..nw].iter().map(|k| k.count_ones()).sum();
-    assert_eq!(total as usize, dst_ids.len(), "keep_heaviest: kept count");
-    assert_eq!(dst_ws.len(), dst_ids.len());
-    let mut j = 0usize;
-    for (b, &word) in keep.iter().enumerate().take(nw) {
-        for q in 0..4 {
-            let k = (word >> (16 * q)) as u16;
-            let c = k.count_ones() as usize;
-            let lane = 64 * b + 16 * q;
-            // SAFETY: lanes lane..lane + 16 are in ids and ws (64·nw of each); the stores
-            // write c ≤ dst.len() − j elements at j (the kept counts sum to dst.len()).
-            unsafe {
-                let v = _mm512_loadu_ps(ws.as_ptr().add(lane));
-                let g = _mm512_loadu_si512(ids.as_ptr().add(lane).cast());
-                let front = ((1u32 << c) - 1) as u16;
-                _mm512_mask_storeu_ps(
-                    dst_ws.as_mut_ptr().add(j),
-                    front,
-                    _mm512_maskz_compress_ps(k, v),
-                );
-                _mm512_mask_storeu_epi32(
-                    dst_ids.as_mut_ptr().add(j).cast(),
-                    front,
-                    _mm512_maskz_compress_epi32(k, g),
-                );
-            }
-            j += c;
-        }
-    }
 }
 
 /// [`lanes_above_equal`] on AVX-512.
@@ -363,26 +277,23 @@ mod tests {
                 .iter()
                 .map(|&k| (key_rank(k), key_weight(k)))
                 .collect();
-            let nn = n.div_ceil(64) * 64;
-            let ids: Vec<u32> = (0..nn as u32).collect();
             let mut pw = ws.clone();
-            pw.resize(nn, 0.0);
-            let (mut got_ids, mut got_ws) = (vec![0u32; m], vec![0f32; m]);
-            keep_heaviest(&ids, &pw, n, &mut got_ids, &mut got_ws, false);
-            let got_portable: Vec<(u32, f32)> = got_ids
-                .iter()
-                .copied()
-                .zip(got_ws.iter().copied())
-                .collect();
+            pw.resize(n.div_ceil(64) * 64, 0.0);
+            let kept = |mask: [u64; 4]| -> Vec<(u32, f32)> {
+                (0..KEEP_MAX)
+                    .filter(|&i| (mask[i / 64] >> (i % 64)) & 1 != 0)
+                    .map(|i| (i as u32, pw[i]))
+                    .collect()
+            };
+            let got_portable = kept(keep_heaviest(&pw, n, m, false));
+            assert_eq!(got_portable, want, "portable: n {n} m {m} levels {levels}");
             #[cfg(target_arch = "x86_64")]
             if std::arch::is_x86_feature_detected!("avx512f")
                 && std::arch::is_x86_feature_detected!("avx512bw")
             {
-                keep_heaviest(&ids, &pw, n, &mut got_ids, &mut got_ws, true);
+                let got = kept(keep_heaviest(&pw, n, m, true));
+                assert_eq!(got, want, "n {n} m {m} levels {levels}");
             }
-            let got: Vec<(u32, f32)> = got_ids.into_iter().zip(got_ws).collect();
-            assert_eq!(got, want, "n {n} m {m} levels {levels}");
-            assert_eq!(got_portable, want, "portable: n {n} m {m} levels {levels}");
         }
     }
 }

@@ -14,9 +14,6 @@ pub struct RenderRequest {
     pub top_k: Option<usize>,
     /// Per-label count of Gaussians that contributed to at least one pixel.
     pub visible_counts: bool,
-    /// Order each pixel's top-K by weight, heaviest first (else front to back, which is
-    /// cheaper; the set is the same). Consumers that only use the set can skip the sort.
-    pub sort_top_k: bool,
 }
 
 impl RenderRequest {
@@ -25,22 +22,12 @@ impl RenderRequest {
         Self::default()
     }
 
-    /// Everything the consensus stage needs: labels, top-K (K = `k`), visible counts. The
-    /// top-K lists come front to back (the consensus only uses them as sets).
+    /// Everything the consensus stage needs: labels, top-K (K = `k`), visible counts.
     pub fn semantic(k: usize) -> Self {
         Self {
             labels: true,
             top_k: Some(k),
             visible_counts: true,
-            sort_top_k: false,
-        }
-    }
-
-    /// [`RenderRequest::semantic`] with each pixel's top-K ordered heaviest first.
-    pub fn semantic_sorted(k: usize) -> Self {
-        Self {
-            sort_top_k: true,
-            ..Self::semantic(k)
         }
     }
 

@@ -5,10 +5,11 @@
 //! where the Gaussian can reach α ≥ 1/255 (exact: other pixels would skip it anyway), one
 //! 16-lane row at a time (one AVX-512 register, two AVX2 ones; a portable build too, all
 //! bit-identical). For top-K every row visit is logged (one vector of 16 weights, see
-//! `row_log`); at the end of the tile each row's per-pixel counts, then regions in the output
-//! (`regions`), then lists are read off the log: straight into the output where a pixel's
-//! list fits in K (the usual case), else into scratch lists whose K heaviest are kept (a
-//! quickselect on lane bit masks, see `keep_heaviest`); sorted only on request. Voting
+//! `row_log`); at the end of the tile each row's log is packed into the band's top-K store
+//! (per visit: id, lane mask, the reached pixels' weights; see `topk`), counting each pixel's
+//! contributions on the way. Pixels with more than K have their K heaviest chosen from their
+//! gathered column (a quickselect on lane bit masks, see `keep_heaviest`) and the rest of
+//! their entries unmarked. Voting
 //! (`row_votes`) costs nothing per visit while every Gaussian of the tile carries one label
 //! (the silhouette is then that label's sum); after that each tile row keeps the few labels
 //! it met and a 16-lane sum per label: one vector add per row visit; rows meeting more
@@ -27,21 +28,13 @@ use crate::blend::{alpha_of, gaussian_power, MIN_ALPHA, MIN_TRANSMITTANCE};
 use crate::keep_heaviest::{keep_heaviest, KEEP_MAX};
 use crate::output::{RenderOutput, RenderRequest};
 use crate::project::Projected;
-use crate::regions::{top_k_is_whole_list, RowRegions};
-use crate::row_log::{boxed_rows, ListSimd, PixelLists, RowDst, RowLog, LIST_CAP, STRIDE};
+use crate::row_log::{Columns, LogSimd, PackDst, RowLog};
 use crate::row_votes::RowVotes;
 use crate::tiles::{TileGrid, TILE_SIZE};
-use crate::topk::{key_rank, select_top_k, topk_key, weight_positions, TopKBand};
+use crate::topk::{key_rank, topk_key, RowSpan, TopKBand, KEPT_SHIFT};
 use crate::voting::vote;
 
 const T: usize = TILE_SIZE as usize;
-
-/// Longest list ranked branch-free ([`weight_positions`]) for a sorted top-K; longer ones use
-/// a selection.
-const RANK_MAX: usize = 128;
-
-// Every scratch list longer than K fits `keep_heaviest`.
-const _: () = assert!(LIST_CAP <= KEEP_MAX);
 
 /// Rasterizes projected, binned Gaussians. `labels` are the map's labels (for voting).
 pub fn rasterize(
@@ -103,8 +96,13 @@ pub fn rasterize_into(
             t.k = k;
             t.width = grid.width;
             t.height = grid.height;
-            fit(&mut t.start, n, 0);
+            t.tiles_x = grid.tiles_x;
             fit(&mut t.count, n, 0);
+            fit(
+                &mut t.rows,
+                (grid.tiles_y * grid.tiles_x) as usize * T,
+                RowSpan::default(),
+            );
             // Band stores keep their length (they are truncated after writing).
             t.bands
                 .resize_with(grid.tiles_y as usize, TopKBand::default);
@@ -124,7 +122,6 @@ pub fn rasterize_into(
         grid,
         labels,
         top_k,
-        sort_top_k: request.sort_top_k,
         visible: visible.as_deref(),
         simd: simd_level(),
     };
@@ -136,10 +133,10 @@ pub fn rasterize_into(
     let mut final_t = out.final_transmittance.chunks_mut(band_len);
     let mut n_contrib = out.n_contrib.chunks_mut(band_len);
     let mut label_img = out.labels.as_mut().map(|v| v.chunks_mut(band_len));
-    let (mut tk_start, mut tk_count, mut tk_bands) = match out.top_k.as_mut() {
+    let (mut tk_count, mut tk_rows, mut tk_bands) = match out.top_k.as_mut() {
         Some(t) => (
-            Some(t.start.chunks_mut(band_len)),
             Some(t.count.chunks_mut(band_len)),
+            Some(t.rows.chunks_mut(grid.tiles_x as usize * T)),
             Some(t.bands.iter_mut()),
         ),
         None => (None, None, None),
@@ -153,10 +150,11 @@ pub fn rasterize_into(
             final_t: final_t.next().expect("band"),
             n_contrib: n_contrib.next().expect("band"),
             labels: label_img.as_mut().and_then(|it| it.next()),
-            topk_start: tk_start.as_mut().and_then(|it| it.next()),
             topk_count: tk_count.as_mut().and_then(|it| it.next()),
+            topk_rows: tk_rows.as_mut().and_then(|it| it.next()),
             topk_band: tk_bands.as_mut().and_then(|it| it.next()),
-            topk_len: 0,
+            topk_visits: 0,
+            topk_weights: 0,
         })
         .collect();
 
@@ -175,8 +173,9 @@ pub fn rasterize_into(
                 }
             }
             if let Some(store) = band.topk_band.as_deref_mut() {
-                store.ids.truncate(band.topk_len);
-                store.weights.truncate(band.topk_len);
+                store.ids.truncate(band.topk_visits);
+                store.lanes.truncate(band.topk_visits);
+                store.weights.truncate(band.topk_weights);
             }
         })
     });
@@ -224,14 +223,14 @@ enum Simd {
 }
 
 impl Simd {
-    /// How the top-K lists are read off the row log with these kernels.
-    fn lists(self) -> ListSimd {
+    /// How the row log is packed with these kernels.
+    fn log(self) -> LogSimd {
         match self {
-            Simd::Portable => ListSimd::Portable,
+            Simd::Portable => LogSimd::Portable,
             #[cfg(target_arch = "x86_64")]
-            Simd::Avx2 => ListSimd::Avx2,
+            Simd::Avx2 => LogSimd::Avx2,
             #[cfg(target_arch = "x86_64")]
-            Simd::Avx512 => ListSimd::Avx512,
+            Simd::Avx512 => LogSimd::Avx512,
         }
     }
 }
@@ -276,7 +275,6 @@ struct Ctx<'a> {
     grid: &'a TileGrid,
     labels: &'a [u32],
     top_k: Option<usize>,
-    sort_top_k: bool,
     visible: Option<&'a [AtomicBool]>,
     simd: Simd,
 }
@@ -290,11 +288,13 @@ struct BandOut<'a> {
     final_t: &'a mut [f32],
     n_contrib: &'a mut [u32],
     labels: Option<&'a mut [u32]>,
-    topk_start: Option<&'a mut [u32]>,
     topk_count: Option<&'a mut [u16]>,
+    /// The band's tile rows (tile tx, row y: `16·tx + y`).
+    topk_rows: Option<&'a mut [RowSpan]>,
     topk_band: Option<&'a mut TopKBand>,
-    /// Top-K entries this band has written so far.
-    topk_len: usize,
+    /// Top-K visits and weights this band has written so far.
+    topk_visits: usize,
+    topk_weights: usize,
 }
 
 /// Per-pixel accumulators of one tile, as 16 rows of 16 lanes. Transmittance is stored
@@ -308,25 +308,18 @@ struct TileState {
     s: [[f32; T]; T],
     last: [[u32; T]; T],
     row_live: [u32; T],
-    /// Contributions per pixel, counted off the row log after the lane loop (lists mode).
-    count: [[u32; T]; T],
 }
-
-/// Per-pixel contribution lists of one tile, `[row][lane][slot]`, for the pixels whose top-K
-/// is not their whole list front to back (longer than K, or sorted on request).
-type Slots<V> = [PixelLists<V>; T];
 
 struct Scratch {
     st: Box<TileState>,
     /// GS Voting sums, per tile row.
     row_votes: Box<RowVotes>,
     log: RowLog,
-    ids: Box<Slots<u32>>,
-    ws: Box<Slots<f32>>,
+    /// Gathered contributions (visit index, weight) of a row's pixels with more than K.
+    long: (Vec<u32>, Vec<f32>),
     keys: Vec<u64>,
     votes: Vec<(u32, f32)>,
     replay: Vec<(u32, f32)>,
-    pos: [u32; RANK_MAX],
 }
 
 thread_local! {
@@ -347,15 +340,12 @@ impl Scratch {
                 s: [[0.0; T]; T],
                 last: [[0; T]; T],
                 row_live: [0; T],
-                count: [[0; T]; T],
             }),
             log: RowLog::new(),
-            ids: boxed_rows([[0; STRIDE]; T]),
-            ws: boxed_rows([[0.0; STRIDE]; T]),
+            long: (Vec::new(), Vec::new()),
             keys: Vec::new(),
             votes: Vec::new(),
             replay: Vec::new(),
-            pos: [0; RANK_MAX],
         }
     }
 }
@@ -640,7 +630,7 @@ fn write_tile<const LISTS: bool, const VOTE: bool>(
     }
     let list = ctx.bins.tile(tile);
     if LISTS {
-        build_top_k(ctx, scratch, band, x0, rows, cols, list);
+        build_top_k(ctx, scratch, band, tx, rows, cols);
     }
     if VOTE {
         if let Some(labels) = band.labels.as_deref_mut() {
@@ -648,8 +638,6 @@ fn write_tile<const LISTS: bool, const VOTE: bool>(
                 st,
                 row_votes,
                 log,
-                ids,
-                ws,
                 votes,
                 replay,
                 ..
@@ -665,33 +653,24 @@ fn write_tile<const LISTS: bool, const VOTE: bool>(
                 }
                 return;
             }
-            let lists = ListsOfTile {
-                st,
-                log,
-                ids,
-                ws,
-                store: band.topk_band.as_deref(),
-                start: band.topk_start.as_deref(),
-            };
             for y in 0..rows {
                 let row = &mut labels[y * w + x0..][..cols];
                 if !row_votes.overflowed(y) {
                     row.copy_from_slice(&row_votes.winners(y)[..cols]);
                     continue;
                 }
-                // More labels than the row tracks: vote over each pixel's list, or its replay.
+                // More labels than the row tracks: vote over each pixel's column of the log,
+                // or its replay when no log was kept.
                 for (x, label) in row.iter_mut().enumerate() {
-                    let o = y * w + x0 + x;
-                    *label = match lists.pixel(ctx, y, x, o) {
-                        Some((ids, ws)) => vote_list(ids, ws, ctx.labels, votes),
-                        None => {
-                            let (px, py) = ((x0 + x) as u32, (band.band * T + y) as u32);
-                            replay_pixel(ctx.projected, list, px, py, replay);
-                            let it = replay
-                                .iter()
-                                .map(|&(r, wt)| (ctx.labels[list[r as usize] as usize], wt));
-                            vote(it, votes)
-                        }
+                    *label = if LISTS {
+                        vote_list(log.column(y, x), ctx.labels, votes)
+                    } else {
+                        let (px, py) = ((x0 + x) as u32, (band.band * T + y) as u32);
+                        replay_pixel(ctx.projected, list, px, py, replay);
+                        let it = replay
+                            .iter()
+                            .map(|&(r, wt)| (ctx.labels[list[r as usize] as usize], wt));
+                        vote(it, votes)
                     };
                 }
             }
@@ -699,55 +678,24 @@ fn write_tile<const LISTS: bool, const VOTE: bool>(
     }
 }
 
-/// Whether a tile pixel with `n` contributions on row `y` has its full list written (in the
-/// band store or the scratch lists); else it is replayed.
-#[inline(always)]
-fn has_list(log: &RowLog, y: usize, n: usize, k: usize, sort: bool) -> bool {
-    !log.overflowed(y) && (n <= LIST_CAP || top_k_is_whole_list(n, k, sort))
-}
-
-/// Where a finished tile's full per-pixel contribution lists are, after [`build_top_k`].
-struct ListsOfTile<'a> {
-    st: &'a TileState,
-    log: &'a RowLog,
-    ids: &'a Slots<u32>,
-    ws: &'a Slots<f32>,
-    store: Option<&'a TopKBand>,
-    start: Option<&'a [u32]>,
-}
-
-impl<'a> ListsOfTile<'a> {
-    /// Tile pixel (x, y)'s list (band image index `o`), front to back: in the band store or
-    /// the scratch lists; `None` if not kept (its row log overflowed: replay it).
-    fn pixel(&self, ctx: &Ctx, y: usize, x: usize, o: usize) -> Option<(&'a [u32], &'a [f32])> {
-        let n = self.st.count[y][x] as usize;
-        let k = ctx.top_k?;
-        if !has_list(self.log, y, n, k, ctx.sort_top_k) {
-            return None;
-        }
-        if top_k_is_whole_list(n, k, ctx.sort_top_k) {
-            let (s, store) = (self.start?[o] as usize, self.store?);
-            Some((&store.ids[s..s + n], &store.weights[s..s + n]))
-        } else {
-            Some((&self.ids[y][x][..n], &self.ws[y][x][..n]))
-        }
-    }
-}
-
 /// Label slots of the list vote before it falls back to the general [`vote`].
 const LIST_VOTE_SLOTS: usize = 8;
 
-/// GS Voting over one pixel's list (front to back): the same sums, in the same order, as
-/// [`vote`] and the reference, so the same winner.
+/// GS Voting over one pixel's contributions (Gaussian id, weight), front to back: the same
+/// sums, in the same order, as [`vote`] and the reference, so the same winner.
 #[inline(always)]
-fn vote_list(ids: &[u32], ws: &[f32], labels: &[u32], votes: &mut Vec<(u32, f32)>) -> u32 {
+fn vote_list(
+    entries: impl Iterator<Item = (u32, f32)> + Clone,
+    labels: &[u32],
+    votes: &mut Vec<(u32, f32)>,
+) -> u32 {
     let mut lab = [0u32; LIST_VOTE_SLOTS];
     let mut sum = [0.0f32; LIST_VOTE_SLOTS];
     let mut used = 0usize;
     // The running label's sum stays in a register (a store and reload per entry would
     // chain through store forwarding); it is written back when the label changes.
     let (mut cur, mut cur_label, mut acc) = (0usize, 0u32, 0.0f32);
-    for (&id, &wt) in ids.iter().zip(ws) {
+    for (id, wt) in entries.clone() {
         let l = labels[id as usize];
         if l == 0 {
             continue;
@@ -760,7 +708,7 @@ fn vote_list(ids: &[u32], ws: &[f32], labels: &[u32], votes: &mut Vec<(u32, f32)
             cur = lab[..used].iter().position(|&x| x == l).unwrap_or(used);
             if cur == used {
                 if used == LIST_VOTE_SLOTS {
-                    let it = ids.iter().zip(ws).map(|(&i, &w)| (labels[i as usize], w));
+                    let it = entries.map(|(i, w)| (labels[i as usize], w));
                     return vote(it, votes);
                 }
                 lab[used] = l;
@@ -785,181 +733,130 @@ fn vote_list(ids: &[u32], ws: &[f32], labels: &[u32], votes: &mut Vec<(u32, f32)
     best.0
 }
 
-/// Writes the tile's top-K into the band store: each pixel's region (K or fewer entries, in
-/// pixel order) is laid out from the counts, then the row logs are read off into the regions
-/// directly where the top-K is the whole list front to back (the usual case), else into
-/// scratch lists from which the K heaviest are chosen (and sorted on request). Pixels of rows
-/// whose log overflowed are replayed.
-#[allow(clippy::too_many_arguments)]
+/// Writes the tile's top-K into the band store: each row's log is packed (its visits, lane
+/// masks and weights, every contribution marked kept) and its pixels counted; pixels with
+/// more than K contributions then keep only their K heaviest marked.
 #[inline(always)]
 fn build_top_k(
     ctx: &Ctx,
     scratch: &mut Scratch,
     band: &mut BandOut,
-    x0: usize,
+    tx: usize,
     rows: usize,
     cols: usize,
-    list: &[u32],
 ) {
     let w = ctx.grid.width as usize;
     let k = ctx.top_k.unwrap_or(usize::MAX);
-    let sort = ctx.sort_top_k;
-    let (Some(start), Some(count), Some(store)) = (
-        band.topk_start.as_deref_mut(),
+    let (Some(count), Some(spans), Some(store)) = (
         band.topk_count.as_deref_mut(),
+        band.topk_rows.as_deref_mut(),
         band.topk_band.as_deref_mut(),
     ) else {
         return;
     };
     let Scratch {
-        st,
-        log,
-        ids: scratch_ids,
-        ws: scratch_ws,
-        keys,
-        replay,
-        pos,
-        ..
+        log, long, keys, ..
     } = scratch;
-    let at0 = band.topk_len;
-    // k ≤ u16::MAX (clamped by the caller), so no sum of a row's entries wraps.
-    let k32 = k.min(u16::MAX as usize) as u32;
-    let simd = ctx.simd.lists();
+    let simd = ctx.simd.log();
     #[cfg(target_arch = "x86_64")]
     let avx512 = ctx.simd == Simd::Avx512;
     #[cfg(not(target_arch = "x86_64"))]
     let avx512 = false;
-    // Per row, the pixels whose top-K is not written by the list read-off: chosen from the
-    // scratch lists, or replayed (all pixels with contributions, where the log overflowed).
-    let mut later = [0u32; T];
-    // Entries of the tile's rows so far: each row's regions follow the previous row's.
-    let mut off = 0usize;
-    for (y, (scratch_ids, scratch_ws)) in scratch_ids
-        .iter_mut()
-        .zip(scratch_ws.iter_mut())
-        .enumerate()
-        .take(rows)
-    {
-        let listed = !log.overflowed(y);
-        st.count[y] = if listed {
-            log.counts(y, simd)
-        } else {
-            // Too many visits to log: the row's lists are replayed, here only to count them.
-            std::array::from_fn(|x| {
-                if x < cols {
-                    let (px, py) = ((x0 + x) as u32, (band.band * T + y) as u32);
-                    replay_pixel(ctx.projected, list, px, py, replay);
-                    replay.len() as u32
-                } else {
-                    0
-                }
-            })
+    let x0 = tx * T;
+    for (y, span) in spans[tx * T..][..T].iter_mut().enumerate() {
+        let (v0, w0) = (band.topk_visits, band.topk_weights);
+        let n = if y < rows { log.len(y) } else { 0 };
+        *span = RowSpan {
+            visits: v0 as u32,
+            len: n as u32,
+            weights: w0 as u32,
         };
-        let counts = &st.count[y];
-        let r = RowRegions::new(counts, k32, sort);
-        let o = y * w + x0;
-        let base = at0 + off;
-        for x in 0..cols {
-            start[o + x] = base as u32 + r.before[x];
-            count[o + x] = r.kept[x] as u16;
+        if n == 0 {
+            if y < rows {
+                count[y * w + x0..][..cols].fill(0);
+            }
+            continue;
         }
         // The store keeps last frame's length: grow only (no per-frame memset); the band
-        // truncates it to what it used when done. The list readers may store T entries past
-        // the row's last list.
-        let end = base + r.total as usize + T;
-        if store.ids.len() < end {
-            store.ids.resize(end, 0);
-            store.weights.resize(end, 0.0);
+        // truncates it to what it used when done. A visit's store writes 16 weights.
+        if store.ids.len() < v0 + n {
+            store.ids.resize(v0 + n, 0);
+            store.lanes.resize(v0 + n, 0);
         }
-        off += r.total as usize;
-        if listed {
-            let mut dst = RowDst {
-                out_ids: &mut store.ids[base..end],
-                out_ws: &mut store.weights[base..end],
-                off: std::array::from_fn(|x| r.before[x] as usize),
-                n: std::array::from_fn(|x| counts[x] as usize),
-                scratch_ids,
-                scratch_ws,
-                to_scratch: r.to_scratch,
-                skip: r.skip,
-            };
-            log.write_lists(y, simd, &mut dst);
-            later[y] = r.to_scratch | r.skip;
-        } else {
-            for (x, &n) in counts.iter().enumerate() {
-                later[y] |= ((n > 0) as u32) << x;
-            }
+        if store.weights.len() < w0 + T * n {
+            store.weights.resize(w0 + T * n, 0.0);
         }
-    }
-    band.topk_len += off;
-
-    for (y, &row) in later.iter().enumerate().take(rows) {
-        let mut xs = row;
+        let lanes = &mut store.lanes[v0..v0 + n];
+        let packed = log.pack(
+            y,
+            simd,
+            PackDst {
+                ids: &mut store.ids[v0..v0 + n],
+                lanes,
+                weights: &mut store.weights[w0..w0 + T * n],
+            },
+        );
+        band.topk_visits += n;
+        band.topk_weights += packed.weights;
+        let o = y * w + x0;
+        let mut longer = 0u32;
+        for (x, &c) in packed.counts.iter().enumerate().take(cols) {
+            count[o + x] = c.min(k as u32) as u16;
+            longer |= ((c as usize > k) as u32) << x;
+        }
+        if longer == 0 {
+            continue;
+        }
+        // Pixels with more than K: their lighter entries are unmarked.
+        let (long_visits, long_ws) = long;
+        // Room for each gathered pixel's list, its last compressed store and keep_heaviest's
+        // padding to 64 lanes.
+        let stride = n.div_ceil(64) * 64 + T;
+        if long_visits.len() < T * stride {
+            long_visits.resize(T * stride, 0);
+            long_ws.resize(T * stride, 0.0);
+        }
+        let len = log.gather(
+            y,
+            longer,
+            simd,
+            &mut Columns {
+                stride,
+                visits: long_visits,
+                ws: long_ws,
+            },
+        );
+        let lanes = &mut store.lanes[v0..v0 + n];
+        let mut xs = longer;
         while xs != 0 {
             let x = xs.trailing_zeros() as usize;
             xs &= xs - 1;
-            let o = y * w + x0 + x;
-            let n = st.count[y][x] as usize;
-            // Pixels whose whole list went to the output are not in `later`.
-            let listed = has_list(log, y, n, k, sort);
-            let (s, m) = (start[o] as usize, count[o] as usize);
-            let dst_ids = &mut store.ids[s..s + m];
-            let dst_ws = &mut store.weights[s..s + m];
-            if !listed {
-                let (px, py) = ((x0 + x) as u32, (band.band * T + y) as u32);
-                replay_pixel(ctx.projected, list, px, py, replay);
-                keys.clear();
-                keys.extend(
-                    replay
-                        .iter()
-                        .enumerate()
-                        .map(|(i, c)| topk_key(c.1, i as u32)),
-                );
-                for (j, &key) in select_top_k(keys, k, sort).iter().enumerate() {
-                    let (r, wt) = replay[key_rank(key) as usize];
-                    dst_ids[j] = list[r as usize];
-                    dst_ws[j] = wt;
-                }
-            } else if !sort {
-                // Longer than K: the K heaviest, front to back.
-                let (ids, ws) = (&scratch_ids[y][x], &mut scratch_ws[y][x]);
-                ws[n..n.div_ceil(64) * 64].fill(0.0);
-                keep_heaviest(ids, ws, n, dst_ids, dst_ws, avx512);
-            } else if n <= RANK_MAX {
-                let (ids, ws) = (&scratch_ids[y][x], &mut scratch_ws[y][x]);
-                // Padding weights of −1 never outrank a real one.
-                let nn = n.div_ceil(16) * 16;
-                ws[n..nn].fill(-1.0);
-                macro_rules! rank_in {
-                    ($n:literal) => {
-                        weight_positions::<$n>(
-                            ws.first_chunk().expect("STRIDE ≥ RANK_MAX"),
-                            n,
-                            pos.first_chunk_mut().expect("RANK_MAX ≥ N"),
-                        )
-                    };
-                }
-                match nn {
-                    0..=16 => rank_in!(16),
-                    17..=32 => rank_in!(32),
-                    33..=64 => rank_in!(64),
-                    _ => rank_in!(128),
-                }
-                for i in 0..n {
-                    let p = pos[i] as usize;
-                    if p < m {
-                        dst_ids[p] = ids[i];
-                        dst_ws[p] = ws[i];
+            let c = len[x];
+            debug_assert_eq!(c, packed.counts[x] as usize);
+            let (visits, ws) = (
+                &long_visits[x * stride..][..stride],
+                &mut long_ws[x * stride..][..stride],
+            );
+            let unmark = !(1u32 << (KEPT_SHIFT as usize + x));
+            if c <= KEEP_MAX {
+                ws[c..c.div_ceil(64) * 64].fill(0.0);
+                let keep = keep_heaviest(ws, c, k, avx512);
+                for (b, &word) in keep.iter().enumerate().take(c.div_ceil(64)) {
+                    let entries = (c - 64 * b).min(64);
+                    let mut drop = !word & (!0u64 >> (64 - entries));
+                    while drop != 0 {
+                        let i = 64 * b + drop.trailing_zeros() as usize;
+                        drop &= drop - 1;
+                        lanes[visits[i] as usize] &= unmark;
                     }
                 }
             } else {
-                let (ids, ws) = (&scratch_ids[y][x][..n], &scratch_ws[y][x][..n]);
                 keys.clear();
-                keys.extend(ws.iter().enumerate().map(|(i, &wt)| topk_key(wt, i as u32)));
-                for (j, &key) in select_top_k(keys, k, true).iter().enumerate() {
-                    let i = key_rank(key) as usize;
-                    dst_ids[j] = ids[i];
-                    dst_ws[j] = ws[i];
+                keys.extend((0..c).map(|i| topk_key(ws[i], i as u32)));
+                // The lightest c − K: ranks past the K heaviest after the selection.
+                keys.select_nth_unstable_by(k - 1, |a, b| b.cmp(a));
+                for &key in &keys[k..] {
+                    lanes[visits[key_rank(key) as usize] as usize] &= unmark;
                 }
             }
         }

@@ -1,5 +1,5 @@
 //! Top-K Gaussians per pixel by weight (the paper's G_topK): selection over a pixel's
-//! contributions, and compact per-band storage of the result.
+//! contributions, and the per-tile-row storage of the result.
 
 /// Sort key: larger weight first, then the front-most Gaussian (smaller tile rank) on ties.
 #[inline(always)]
@@ -34,77 +34,219 @@ pub fn select_top_k(keys: &mut [u64], k: usize, sort: bool) -> &[u64] {
     &keys[..k]
 }
 
-/// For each of the first `n` weights (front to back), its position when ordered by weight
-/// desc, ties to the front one (lanes past `n` get garbage). O(n·N) compares, but
-/// branch-free with the N positions in vector lanes (one broadcast weight per step, no
-/// horizontal sums): for the few dozen contributions a pixel has, far cheaper than a sort.
-#[inline(always)]
-pub fn weight_positions<const N: usize>(ws: &[f32; N], n: usize, pos: &mut [u32; N]) {
-    // u32 lane indices keep the tie test as wide as the weight compares.
-    let lane: [u32; N] = std::array::from_fn(|l| l as u32);
-    let mut r = [0u32; N];
-    for (j, &wj) in ws.iter().enumerate().take(n) {
-        let ju = j as u32;
-        for i in 0..N {
-            // j outranks i: heavier, or as heavy and in front.
-            let outranks = (wj > ws[i]) | ((wj == ws[i]) & (ju < lane[i]));
-            r[i] += outranks as u32;
-        }
-    }
-    *pos = r;
+/// Where one tile row's visits are in its band's arrays.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct RowSpan {
+    /// First visit (index into the band's `ids` and `lanes`).
+    pub visits: u32,
+    /// Number of visits.
+    pub len: u32,
+    /// Where the first visit's weights start in the band's `weights`.
+    pub weights: u32,
 }
 
-/// Top-K lists of one band of 16 image rows.
+/// The top-K of one band of 16 image rows, stored as the renderer met it: per tile row, its
+/// visits front to back (a Gaussian compositing onto some of the row's 16 pixels), each with
+/// the weights of the pixels it reached. A pixel's top-K are the visits whose kept bit for
+/// its lane is set. Writing a visit is one compressed vector store; per-pixel lists cost the
+/// renderer a transpose and two stores per 16 visits and pixel, most of the top-K's price.
 #[derive(Debug, Clone, Default)]
 pub struct TopKBand {
+    /// Per visit: the Gaussian's map id.
     pub ids: Vec<u32>,
+    /// Per visit: bit x (x < 16) when pixel x of the row took a weight (stored in
+    /// `weights`); bit 16 + x when that weight is among pixel x's K heaviest.
+    pub lanes: Vec<u32>,
+    /// The visits' weights α·T, visit by visit, in lane order.
     pub weights: Vec<f32>,
 }
 
-/// Top-K Gaussians per pixel: ids (map indices) and weights α·T; heaviest first when the
-/// request asked for sorting, else front to back.
+/// Bits 0..16 of a visit's `lanes`: the pixels it reached.
+pub const REACHED: u32 = 0xFFFF;
+/// First bit of a visit's kept lanes.
+pub const KEPT_SHIFT: u32 = 16;
+
+/// Top-K Gaussians per pixel (the paper's G_topK): ids (map indices) and weights α·T, read
+/// per pixel front to back ([`TopK::pixel`]) or heaviest first ([`TopK::pixel_sorted`]).
 #[derive(Debug, Clone, Default)]
 pub struct TopK {
     pub k: usize,
     pub width: u32,
     pub height: u32,
-    /// Per pixel (row-major): start of its entries in its band's arrays.
-    pub start: Vec<u32>,
-    /// Per pixel: number of entries (≤ k).
+    /// Tiles per image row (tile rows of band b, tile tx, row y: `rows[(b·tiles_x + tx)·16 + y]`).
+    pub tiles_x: u32,
+    /// Per pixel (row-major): number of entries (≤ k).
     pub count: Vec<u16>,
+    /// Per tile row, band by band, tile by tile, 16 rows each (past the image: empty).
+    pub rows: Vec<RowSpan>,
     /// One entry per 16-row band (image rows 16·b .. 16·b + 15).
     pub bands: Vec<TopKBand>,
 }
 
+/// One pixel's top-K entries (Gaussian id, weight), front to back.
+#[derive(Debug, Clone)]
+pub struct PixelEntries<'a> {
+    ids: &'a [u32],
+    lanes: &'a [u32],
+    weights: &'a [f32],
+    /// Bit of the pixel's kept lane.
+    kept: u32,
+    /// The reached lanes before the pixel's (its weight's place in a visit).
+    before: u32,
+    v: usize,
+    w: usize,
+}
+
+impl Iterator for PixelEntries<'_> {
+    type Item = (u32, f32);
+
+    #[inline]
+    fn next(&mut self) -> Option<(u32, f32)> {
+        while self.v < self.lanes.len() {
+            let (l, v, w) = (self.lanes[self.v], self.v, self.w);
+            self.v += 1;
+            self.w += (l & REACHED).count_ones() as usize;
+            if l & self.kept != 0 {
+                let at = w + (l & self.before).count_ones() as usize;
+                return Some((self.ids[v], self.weights[at]));
+            }
+        }
+        None
+    }
+}
+
+const T: u32 = crate::tiles::TILE_SIZE;
+
 impl TopK {
-    /// (Gaussian ids, weights) of pixel (x, y).
-    pub fn pixel(&self, x: u32, y: u32) -> (&[u32], &[f32]) {
-        let p = (y * self.width + x) as usize;
-        let band = &self.bands[(y / crate::tiles::TILE_SIZE) as usize];
-        let s = self.start[p] as usize;
-        let n = self.count[p] as usize;
-        (&band.ids[s..s + n], &band.weights[s..s + n])
+    /// Index into `rows` of the tile row holding pixel (x, y).
+    fn row_index(&self, x: u32, y: u32) -> usize {
+        (((y / T) * self.tiles_x + x / T) * T + y % T) as usize
     }
 
-    /// Total number of stored (id, weight) entries.
+    /// Pixel (x, y)'s top-K (Gaussian id, weight α·T), front to back.
+    pub fn pixel(&self, x: u32, y: u32) -> PixelEntries<'_> {
+        assert!(
+            x < self.width && y < self.height,
+            "pixel ({x}, {y}) outside {}x{}",
+            self.width,
+            self.height
+        );
+        let span = self.rows[self.row_index(x, y)];
+        let band = &self.bands[(y / T) as usize];
+        let (s, n) = (span.visits as usize, span.len as usize);
+        let lane = x % T;
+        PixelEntries {
+            ids: &band.ids[s..s + n],
+            lanes: &band.lanes[s..s + n],
+            weights: &band.weights[span.weights as usize..],
+            kept: 1 << (KEPT_SHIFT + lane),
+            before: (1 << lane) - 1,
+            v: 0,
+            w: 0,
+        }
+    }
+
+    /// Pixel (x, y)'s top-K heaviest first (ties: the front one first).
+    pub fn pixel_sorted(&self, x: u32, y: u32) -> Vec<(u32, f32)> {
+        let entries: Vec<(u32, f32)> = self.pixel(x, y).collect();
+        let mut keys: Vec<u64> = entries
+            .iter()
+            .enumerate()
+            .map(|(i, e)| topk_key(e.1, i as u32))
+            .collect();
+        keys.sort_unstable_by(|a, b| b.cmp(a));
+        keys.iter()
+            .map(|&k| entries[key_rank(k) as usize])
+            .collect()
+    }
+
+    /// Total number of (id, weight) entries.
     pub fn entries(&self) -> usize {
-        self.bands.iter().map(|b| b.ids.len()).sum()
+        self.count.iter().map(|&c| c as usize).sum()
+    }
+
+    /// A top-K holding the given per-pixel lists (row-major, front to back), each kept whole
+    /// (K = the longest): one visit per entry. For tests and tools.
+    pub fn from_lists(width: u32, height: u32, lists: &[Vec<(u32, f32)>]) -> Self {
+        assert_eq!(
+            lists.len(),
+            width as usize * height as usize,
+            "one list per pixel"
+        );
+        let tiles_x = width.div_ceil(T);
+        let bands_n = height.div_ceil(T);
+        let mut t = TopK {
+            k: lists.iter().map(Vec::len).max().unwrap_or(0),
+            width,
+            height,
+            tiles_x,
+            count: lists.iter().map(|l| l.len() as u16).collect(),
+            rows: Vec::with_capacity((bands_n * tiles_x * T) as usize),
+            bands: Vec::with_capacity(bands_n as usize),
+        };
+        for b in 0..bands_n {
+            let mut band = TopKBand::default();
+            for tx in 0..tiles_x {
+                for ly in 0..T {
+                    let mut span = RowSpan {
+                        visits: band.ids.len() as u32,
+                        len: 0,
+                        weights: band.weights.len() as u32,
+                    };
+                    let y = b * T + ly;
+                    for lane in 0..T {
+                        let x = tx * T + lane;
+                        if x >= width || y >= height {
+                            continue;
+                        }
+                        for &(id, w) in &lists[(y * width + x) as usize] {
+                            band.ids.push(id);
+                            band.lanes.push((1 << lane) | (1 << (KEPT_SHIFT + lane)));
+                            band.weights.push(w);
+                            span.len += 1;
+                        }
+                    }
+                    t.rows.push(span);
+                }
+            }
+            t.bands.push(band);
+        }
+        t
+    }
+
+    /// Renumbers ids after the map was compacted (`old_to_new` as `GaussianMap::remove_where`
+    /// gives it); removed Gaussians (and ids past `old_to_new`) drop out of every list.
+    pub fn remap(&mut self, old_to_new: &[Option<u32>]) {
+        let rows_per_band = (self.tiles_x * T) as usize;
+        for (r, span) in self.rows.iter().enumerate() {
+            let (b, tx, ly) = (
+                (r / rows_per_band) as u32,
+                (r % rows_per_band) as u32 / T,
+                r as u32 % T,
+            );
+            let band = &mut self.bands[b as usize];
+            let (s, n) = (span.visits as usize, span.len as usize);
+            for (id, lanes) in band.ids[s..s + n].iter_mut().zip(&mut band.lanes[s..s + n]) {
+                if let Some(new) = old_to_new.get(*id as usize).copied().flatten() {
+                    *id = new;
+                    continue;
+                }
+                let mut kept = *lanes >> KEPT_SHIFT;
+                *lanes &= REACHED;
+                while kept != 0 {
+                    let lane = kept.trailing_zeros();
+                    kept &= kept - 1;
+                    let p = ((b * T + ly) * self.width + tx * T + lane) as usize;
+                    self.count[p] -= 1;
+                }
+            }
+        }
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn positions_match_sorting() {
-        let mut ws = [-1.0f32; 16];
-        let vals = [0.1f32, 0.45, 0.1, 0.2, 0.3, 0.45];
-        ws[..6].copy_from_slice(&vals);
-        let mut pos = [0u32; 16];
-        weight_positions(&ws, 6, &mut pos);
-        assert_eq!(&pos[..6], &[4, 0, 5, 3, 2, 1]);
-    }
 
     #[test]
     fn keys_order_by_weight_then_front_first() {
@@ -124,5 +266,73 @@ mod tests {
             .map(|&k| key_rank(k))
             .collect();
         assert_eq!(set, vec![0, 1, 3]);
+    }
+
+    /// A 20×3 top-K by hand: one band, two tiles. Tile row 0 of tile 0 has three visits:
+    /// Gaussian 7 reaching pixels 0, 2 (weights 0.5, 0.25), Gaussian 8 reaching pixel 2
+    /// (0.125, dropped from its top-K), Gaussian 9 reaching pixels 0, 1, 2 (0.1, 0.2, 0.3).
+    fn by_hand() -> TopK {
+        let mut t = TopK::from_lists(20, 3, &vec![Vec::new(); 60]);
+        t.k = 2;
+        let band = &mut t.bands[0];
+        band.ids = vec![7, 8, 9];
+        band.lanes = vec![0b101 | (0b101 << 16), 0b100, 0b111 | (0b111 << 16)];
+        band.weights = vec![0.5, 0.25, 0.125, 0.1, 0.2, 0.3];
+        t.rows[0] = RowSpan {
+            visits: 0,
+            len: 3,
+            weights: 0,
+        };
+        t.count[..3].copy_from_slice(&[2, 1, 2]);
+        t
+    }
+
+    #[test]
+    fn pixels_read_their_lanes_of_each_visit() {
+        let t = by_hand();
+        assert_eq!(t.pixel(0, 0).collect::<Vec<_>>(), [(7, 0.5), (9, 0.1)]);
+        assert_eq!(t.pixel(1, 0).collect::<Vec<_>>(), [(9, 0.2)]);
+        // Gaussian 8's weight is stored (it shifts 9's) but not in pixel 2's top-K.
+        assert_eq!(t.pixel(2, 0).collect::<Vec<_>>(), [(7, 0.25), (9, 0.3)]);
+        assert_eq!(t.pixel_sorted(2, 0), [(9, 0.3), (7, 0.25)]);
+        assert_eq!(t.pixel(3, 0).count(), 0);
+        assert_eq!(t.pixel(19, 2).count(), 0);
+        assert_eq!(t.entries(), 5);
+    }
+
+    #[test]
+    fn remap_drops_removed_gaussians_and_renumbers() {
+        let mut t = by_hand();
+        // 7 removed; 9 → 4.
+        let mut old_to_new = vec![None; 10];
+        old_to_new[9] = Some(4);
+        old_to_new[8] = Some(3);
+        t.remap(&old_to_new);
+        assert_eq!(t.pixel(0, 0).collect::<Vec<_>>(), [(4, 0.1)]);
+        assert_eq!(t.pixel(2, 0).collect::<Vec<_>>(), [(4, 0.3)]);
+        assert_eq!(t.count[..3], [1, 1, 1]);
+        assert_eq!(t.entries(), 3);
+    }
+
+    #[test]
+    fn lists_round_trip_through_every_band_and_tile() {
+        // 35×40 pixels: three tiles across (the last partial), three bands (the last partial).
+        let (w, h) = (35u32, 40u32);
+        let lists: Vec<Vec<(u32, f32)>> = (0..w * h)
+            .map(|p| {
+                (0..p % 5)
+                    .map(|i| (p * 10 + i, 1.0 / (1 + i) as f32))
+                    .collect()
+            })
+            .collect();
+        let t = TopK::from_lists(w, h, &lists);
+        assert_eq!((t.tiles_x, t.bands.len(), t.rows.len()), (3, 3, 3 * 3 * 16));
+        assert_eq!(t.k, 4);
+        for y in 0..h {
+            for x in 0..w {
+                let got: Vec<(u32, f32)> = t.pixel(x, y).collect();
+                assert_eq!(got, lists[(y * w + x) as usize], "({x}, {y})");
+            }
+        }
     }
 }
