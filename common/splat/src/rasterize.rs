@@ -9,11 +9,11 @@
 //! (per visit: id, lane mask, the reached pixels' weights; see `topk`), counting each pixel's
 //! contributions on the way. Pixels with more than K have their K heaviest chosen from their
 //! gathered column (a quickselect on lane bit masks, see `keep_heaviest`) and the rest of
-//! their entries unmarked. Voting
-//! (`row_votes`) costs nothing per visit while every Gaussian of the tile carries one label
-//! (the silhouette is then that label's sum); after that each tile row keeps the few labels
-//! it met and a 16-lane sum per label: one vector add per row visit; rows meeting more
-//! labels are voted exactly at the end of the tile, from their pixels' lists or a replay.
+//! their entries unmarked. Voting (`row_votes`) costs nothing per visit while every Gaussian
+//! of the tile carries one label (the silhouette is then that label's sum); after that each
+//! tile row keeps the few labels it met and a 16-lane sum per label: one vector add per row
+//! visit; rows meeting more labels are voted exactly at the end of the tile, from their
+//! pixels' columns of the log or a replay.
 //! Bands of 16 image rows run in parallel (rayon) with per-thread scratch kept across
 //! frames; one kernel is compiled per combination of requested outputs and per SIMD level.
 
