@@ -32,14 +32,12 @@ impl PixelTopK {
     /// Pixel `pixel`'s (id, weight) entries, front to back (none when out of range).
     fn entries_at(&self, pixel: usize) -> impl Iterator<Item = (u32, f32)> + '_ {
         let t = &self.top_k;
+        // A pixel in range means a width of at least 1.
         let w = t.width as usize;
-        let inside = w > 0 && pixel < t.count.len();
-        let (x, y) = if inside {
-            ((pixel % w) as u32, (pixel / w) as u32)
-        } else {
-            (0, 0)
-        };
-        inside.then(|| t.pixel(x, y)).into_iter().flatten()
+        (pixel < t.count.len())
+            .then(|| t.pixel((pixel % w) as u32, (pixel / w) as u32))
+            .into_iter()
+            .flatten()
     }
 
     /// Weight α·T of Gaussian `id` at `pixel`, if it is in that pixel's top-K.

@@ -250,7 +250,7 @@ mod tests {
     use rand_chacha::ChaCha8Rng;
 
     use super::*;
-    use crate::topk::{key_rank, key_weight, select_top_k, topk_key};
+    use crate::topk::heaviest_first;
 
     #[test]
     fn keep_heaviest_matches_selection() {
@@ -268,15 +268,10 @@ mod tests {
             let ws: Vec<f32> = (0..n)
                 .map(|_| (1 + rnd() % levels) as f32 / (levels + 1) as f32)
                 .collect();
-            let mut keys: Vec<u64> = ws
-                .iter()
-                .enumerate()
-                .map(|(i, &w)| topk_key(w, i as u32))
-                .collect();
-            let want: Vec<(u32, f32)> = select_top_k(&mut keys, m, false)
-                .iter()
-                .map(|&k| (key_rank(k), key_weight(k)))
-                .collect();
+            let entries: Vec<(u32, f32)> = (0..n as u32).zip(ws.iter().copied()).collect();
+            // The m heaviest, in front-to-back order (entry i has id i).
+            let mut want = heaviest_first(&entries, m);
+            want.sort_by_key(|e| e.0);
             let mut pw = ws.clone();
             pw.resize(n.div_ceil(64) * 64, 0.0);
             let kept = |mask: [u64; 4]| -> Vec<(u32, f32)> {

@@ -786,13 +786,12 @@ fn build_top_k(
         if store.weights.len() < w0 + T * n {
             store.weights.resize(w0 + T * n, 0.0);
         }
-        let lanes = &mut store.lanes[v0..v0 + n];
         let packed = log.pack(
             y,
             simd,
             PackDst {
                 ids: &mut store.ids[v0..v0 + n],
-                lanes,
+                lanes: &mut store.lanes[v0..v0 + n],
                 weights: &mut store.weights[w0..w0 + T * n],
             },
         );
@@ -820,7 +819,7 @@ fn build_top_k(
             y,
             longer,
             simd,
-            &mut Columns {
+            Columns {
                 stride,
                 visits: long_visits,
                 ws: long_ws,

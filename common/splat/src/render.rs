@@ -7,7 +7,7 @@ use crate::output::{RenderOutput, RenderRequest};
 use crate::project::{project_into, Projected};
 use crate::rasterize::{rasterize_into, replay_pixel};
 use crate::tiles::{TileGrid, TILE_SIZE};
-use crate::topk::{key_rank, key_weight, select_top_k, topk_key};
+use crate::topk::heaviest_first;
 
 /// A forward pass with its intermediate data kept for a later backward pass.
 #[derive(Debug, Clone, Default)]
@@ -60,16 +60,6 @@ impl Rendered {
     /// Top-K of one pixel on demand, heaviest first — the same lists the in-pass top-K gives,
     /// for callers that need them only at a few pixels (e.g. where a label changes, §4).
     pub fn top_k_at(&self, x: u32, y: u32, k: usize) -> Vec<(u32, f32)> {
-        let contribs = self.pixel_contributions(x, y);
-        // Rank = front-to-back position, so ties keep the front Gaussian first.
-        let mut keys: Vec<u64> = contribs
-            .iter()
-            .enumerate()
-            .map(|(i, &(_, w))| topk_key(w, i as u32))
-            .collect();
-        select_top_k(&mut keys, k, true)
-            .iter()
-            .map(|&key| (contribs[key_rank(key) as usize].0, key_weight(key)))
-            .collect()
+        heaviest_first(&self.pixel_contributions(x, y), k)
     }
 }

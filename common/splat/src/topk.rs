@@ -9,29 +9,28 @@ pub fn topk_key(weight: f32, rank: u32) -> u64 {
 }
 
 #[inline(always)]
-pub fn key_weight(key: u64) -> f32 {
-    f32::from_bits((key >> 32) as u32)
-}
-
-#[inline(always)]
 pub fn key_rank(key: u64) -> u32 {
     !(key as u32)
 }
 
-/// The `k` largest keys: sorted descending (heaviest first) if `sort`, else front to back.
-pub fn select_top_k(keys: &mut [u64], k: usize, sort: bool) -> &[u64] {
+/// The `k` heaviest of a pixel's entries (id, weight), given front to back: heaviest first,
+/// ties to the front one.
+pub fn heaviest_first(entries: &[(u32, f32)], k: usize) -> Vec<(u32, f32)> {
+    // Rank = front-to-back position.
+    let mut keys: Vec<u64> = entries
+        .iter()
+        .enumerate()
+        .map(|(i, e)| topk_key(e.1, i as u32))
+        .collect();
     let k = k.min(keys.len());
-    if sort {
-        if keys.len() > k {
-            keys.select_nth_unstable_by(k - 1, |a, b| b.cmp(a));
-        }
-        keys[..k].sort_unstable_by(|a, b| b.cmp(a));
-    } else if keys.len() > k {
+    if keys.len() > k && k > 0 {
         keys.select_nth_unstable_by(k - 1, |a, b| b.cmp(a));
-        // Back to front-to-back order: larger rank bits (!rank) first.
-        keys[..k].sort_unstable_by_key(|&key| std::cmp::Reverse(key as u32));
     }
-    &keys[..k]
+    keys[..k].sort_unstable_by(|a, b| b.cmp(a));
+    keys[..k]
+        .iter()
+        .map(|&key| entries[key_rank(key) as usize])
+        .collect()
 }
 
 /// Where one tile row's visits are in its band's arrays.
@@ -149,15 +148,7 @@ impl TopK {
     /// Pixel (x, y)'s top-K heaviest first (ties: the front one first).
     pub fn pixel_sorted(&self, x: u32, y: u32) -> Vec<(u32, f32)> {
         let entries: Vec<(u32, f32)> = self.pixel(x, y).collect();
-        let mut keys: Vec<u64> = entries
-            .iter()
-            .enumerate()
-            .map(|(i, e)| topk_key(e.1, i as u32))
-            .collect();
-        keys.sort_unstable_by(|a, b| b.cmp(a));
-        keys.iter()
-            .map(|&k| entries[key_rank(k) as usize])
-            .collect()
+        heaviest_first(&entries, entries.len())
     }
 
     /// Total number of (id, weight) entries.
@@ -249,23 +240,15 @@ mod tests {
     use super::*;
 
     #[test]
-    fn keys_order_by_weight_then_front_first() {
-        let mut keys = vec![
-            topk_key(0.1, 0),
-            topk_key(0.45, 1),
-            topk_key(0.1, 2),
-            topk_key(0.2, 3),
-        ];
-        let top: Vec<(u32, f32)> = select_top_k(&mut keys.clone(), 3, true)
-            .iter()
-            .map(|&k| (key_rank(k), key_weight(k)))
-            .collect();
-        assert_eq!(top, vec![(1, 0.45), (3, 0.2), (0, 0.1)]);
-        let set: Vec<u32> = select_top_k(&mut keys, 3, false)
-            .iter()
-            .map(|&k| key_rank(k))
-            .collect();
-        assert_eq!(set, vec![0, 1, 3]);
+    fn heaviest_first_orders_by_weight_then_front_first() {
+        let entries = [(10, 0.1), (11, 0.45), (12, 0.1), (13, 0.2)];
+        assert_eq!(
+            heaviest_first(&entries, 3),
+            vec![(11, 0.45), (13, 0.2), (10, 0.1)]
+        );
+        assert_eq!(heaviest_first(&entries, 9).len(), 4);
+        assert!(heaviest_first(&entries, 0).is_empty());
+        assert_eq!(key_rank(topk_key(0.45, 7)), 7);
     }
 
     /// A 20×3 top-K by hand: one band, two tiles. Tile row 0 of tile 0 has three visits:
