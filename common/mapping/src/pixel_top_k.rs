@@ -78,8 +78,8 @@ mod tests {
             2,
             1,
             &[
-                vec![(0, 0.5), (2, 0.25), (3, 0.1)],
-                vec![(1, 0.5), (3, 0.2)],
+                vec![(0, 0.5), (2, 0.25), (3, 0.125)],
+                vec![(1, 0.5), (3, 0.375)],
             ],
         );
         // Gaussians 0 and 3 removed: 1 → 0, 2 → 1.
@@ -95,9 +95,10 @@ mod tests {
 
     #[test]
     fn lists_of_every_band_are_found_and_remapped() {
-        // 3×40 pixels: three 16-row bands, the last one partial. Pixel p lists p % 7 ids.
+        // 3×40 pixels: three 16-row bands, the last one partial. Pixel p lists p % 7 ids,
+        // weights in eighths (f16 holds them exactly).
         let lists: Vec<Vec<(u32, f32)>> = (0..120u32)
-            .map(|p| (0..p % 7).map(|i| (p + i, i as f32 * 0.1)).collect())
+            .map(|p| (0..p % 7).map(|i| (p + i, (i + 1) as f32 / 8.0)).collect())
             .collect();
         let mut t = PixelTopK::from_lists(3, 40, &lists);
         assert_eq!(t.pixel_count(), 120);
@@ -106,7 +107,7 @@ mod tests {
             let ids: Vec<u32> = list.iter().map(|e| e.0).collect();
             assert_eq!(t.gaussians_at(p).collect::<Vec<_>>(), ids, "pixel {p}");
         }
-        assert_eq!(t.weight_of(104, 106), Some(0.2));
+        assert_eq!(t.weight_of(104, 106), Some(0.375));
         // Odd ids removed, even ones halved.
         let old_to_new: Vec<Option<u32>> =
             (0..130u32).map(|i| (i % 2 == 0).then_some(i / 2)).collect();
@@ -119,6 +120,6 @@ mod tests {
                 .collect();
             assert_eq!(t.gaussians_at(p).collect::<Vec<_>>(), ids, "pixel {p}");
         }
-        assert_eq!(t.weight_of(104, 53), Some(0.2));
+        assert_eq!(t.weight_of(104, 53), Some(0.375));
     }
 }

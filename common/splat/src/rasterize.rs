@@ -261,6 +261,7 @@ fn simd_level() -> Simd {
             return Simd::Avx512;
         }
         if std::arch::is_x86_feature_detected!("avx2")
+            && std::arch::is_x86_feature_detected!("f16c")
             && std::arch::is_x86_feature_detected!("popcnt")
         {
             return Simd::Avx2;
@@ -784,7 +785,7 @@ fn build_top_k(
             store.lanes.resize(v0 + n, 0);
         }
         if store.weights.len() < w0 + T * n {
-            store.weights.resize(w0 + T * n, 0.0);
+            store.weights.resize(w0 + T * n, half::f16::ZERO);
         }
         let packed = log.pack(
             y,

@@ -9,7 +9,8 @@
 //! the pack about 3 ms.
 
 use crate::tiles::TILE_SIZE;
-use crate::topk::KEPT_SHIFT;
+use crate::topk::{store_weight, KEPT_SHIFT, WEIGHT_SCALE};
+use half::f16;
 
 const T: usize = TILE_SIZE as usize;
 
@@ -31,12 +32,13 @@ pub(crate) enum LogSimd {
 }
 
 /// Where one row's packed visits go: per visit its id and lanes (reached pixels in bits
-/// 0..16, the same as kept in bits 16..32), and the reached pixels' weights back to back.
-/// `weights` must hold 16 per visit (a visit's store writes 16 lanes, however few it keeps).
+/// 0..16, the same as kept in bits 16..32), and the reached pixels' weights back to back
+/// ([stored](store_weight) as f16). `weights` must hold 16 per visit (a visit's store
+/// writes 16 lanes, however few it keeps).
 pub(crate) struct PackDst<'a> {
     pub ids: &'a mut [u32],
     pub lanes: &'a mut [u32],
-    pub weights: &'a mut [f32],
+    pub weights: &'a mut [f16],
 }
 
 /// Where [`RowLog::gather`] puts pixel x's contributions: visit indices in
@@ -207,7 +209,7 @@ impl RowLog {
             // Branch-free: every lane is written, only contributions advance (at < 16·n).
             for (x, (&w, c)) in wv.iter().zip(&mut counts).enumerate() {
                 let took = w > 0.0;
-                dst.weights[at] = w;
+                dst.weights[at] = store_weight(w);
                 at += took as usize;
                 m |= (took as u32) << x;
                 *c += took as u32;
@@ -220,8 +222,8 @@ impl RowLog {
         }
     }
 
-    /// [`RowLog::pack`] on AVX-512: per visit a compare, a masked add (the counts) and a
-    /// compress.
+    /// [`RowLog::pack`] on AVX-512: per visit a compare, a masked add (the counts), a
+    /// compress and a conversion to f16.
     ///
     /// # Safety
     /// The caller must ensure the CPU supports AVX-512 F and POPCNT.
@@ -231,16 +233,21 @@ impl RowLog {
         use std::arch::x86_64::*;
         let zero = _mm512_setzero_ps();
         let one = _mm512_set1_epi32(1);
+        let scale = _mm512_set1_ps(WEIGHT_SCALE);
         let mut counts = _mm512_setzero_si512();
-        let out = dst.weights.as_mut_ptr();
+        let out = dst.weights.as_mut_ptr().cast::<u16>();
         let mut at = 0usize;
         for (wv, lanes) in self.w[y].iter().zip(dst.lanes.iter_mut()) {
             // SAFETY: 16 weights of the visit.
             let w = unsafe { _mm512_loadu_ps(wv.as_ptr()) };
             let m = _mm512_cmp_ps_mask::<_CMP_GT_OQ>(w, zero);
             counts = _mm512_mask_add_epi32(counts, m, counts, one);
+            let h = _mm512_cvtps_ph::<ROUND_NEAREST>(_mm512_maskz_compress_ps(
+                m,
+                _mm512_mul_ps(w, scale),
+            ));
             // SAFETY: at ≤ 16·v before visit v, and `weights` holds 16·n (checked by `pack`).
-            unsafe { _mm512_storeu_ps(out.add(at), _mm512_maskz_compress_ps(m, w)) };
+            unsafe { _mm256_storeu_si256(out.add(at).cast(), h) };
             at += m.count_ones() as usize;
             *lanes = m as u32 | ((m as u32) << KEPT_SHIFT);
         }
@@ -254,18 +261,19 @@ impl RowLog {
     }
 
     /// [`RowLog::pack`] on AVX2: per half visit a compare, a subtract (the counts: a true
-    /// compare is −1) and a permutation from a table that packs the taken lanes to the front
-    /// (AVX2 has no compress).
+    /// compare is −1), a permutation from a table that packs the taken lanes to the front
+    /// (AVX2 has no compress) and a conversion to f16.
     ///
     /// # Safety
-    /// The caller must ensure the CPU supports AVX2 and POPCNT.
+    /// The caller must ensure the CPU supports AVX2, F16C and POPCNT.
     #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2,popcnt")]
+    #[target_feature(enable = "avx2,f16c,popcnt")]
     unsafe fn pack_avx2(&self, y: usize, dst: PackDst) -> Packed {
         use std::arch::x86_64::*;
         let zero = _mm256_setzero_ps();
+        let scale = _mm256_set1_ps(WEIGHT_SCALE);
         let mut counts = [_mm256_setzero_si256(); 2];
-        let out = dst.weights.as_mut_ptr();
+        let out = dst.weights.as_mut_ptr().cast::<u16>();
         let mut at = 0usize;
         for (wv, lanes) in self.w[y].iter().zip(dst.lanes.iter_mut()) {
             let mut m = 0u32;
@@ -276,8 +284,10 @@ impl RowLog {
                 *counts = _mm256_sub_epi32(*counts, _mm256_castps_si256(took));
                 let mh = _mm256_movemask_ps(took) as usize;
                 let perm = _mm256_loadu_si256(PACK8[mh].as_ptr().cast());
+                let packed = _mm256_permutevar8x32_ps(_mm256_mul_ps(w, scale), perm);
+                let halves = _mm256_cvtps_ph::<ROUND_NEAREST>(packed);
                 // SAFETY: at ≤ 16·v + 8·h before this half, and `weights` holds 16·n.
-                unsafe { _mm256_storeu_ps(out.add(at), _mm256_permutevar8x32_ps(w, perm)) };
+                unsafe { _mm_storeu_si128(out.add(at).cast(), halves) };
                 at += mh.count_ones() as usize;
                 m |= (mh as u32) << (8 * h);
             }
@@ -295,6 +305,10 @@ impl RowLog {
         }
     }
 }
+
+/// f32 → f16 rounding of the packs: to nearest, ties to even, as `half::f16::from_f32`.
+#[cfg(target_arch = "x86_64")]
+const ROUND_NEAREST: i32 = std::arch::x86_64::_MM_FROUND_TO_NEAREST_INT;
 
 /// Transposes a 16×16 block of f32 (row v, lane x → row x, lane v): 32-bit then 64-bit
 /// interleaves within 128-bit lanes, then two rounds of 128-bit lane shuffles.
@@ -359,7 +373,7 @@ static PACK8: [[u32; 8]; 256] = {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::topk::REACHED;
+    use crate::topk::{load_weight, REACHED};
 
     /// The packers this CPU can run.
     fn simds_here() -> Vec<LogSimd> {
@@ -381,7 +395,8 @@ mod tests {
         v
     }
 
-    /// Row 5 of a log with `visits` visits of weights `weight(v, x)` (ids 1000 + v), packed.
+    /// Row 5 of a log with `visits` visits of weights `weight(v, x)` (ids 1000 + v), packed
+    /// (the weights read back as f32).
     fn packed(
         visits: usize,
         weight: impl Fn(usize, usize) -> f32,
@@ -392,7 +407,7 @@ mod tests {
             log.push(5, 1000 + v as u32, &std::array::from_fn(|x| weight(v, x)));
         }
         let (mut ids, mut lanes) = (vec![0; visits], vec![0; visits]);
-        let mut weights = vec![-1.0; T * visits];
+        let mut weights = vec![f16::NEG_ONE; T * visits];
         let p = log.pack(
             5,
             simd,
@@ -402,16 +417,20 @@ mod tests {
                 weights: &mut weights,
             },
         );
-        weights.truncate(p.weights);
+        let weights = weights[..p.weights]
+            .iter()
+            .map(|&h| load_weight(h))
+            .collect();
         (ids, lanes, weights, p.counts)
     }
 
     #[test]
     fn packed_rows_hold_each_visits_weights_in_lane_order() {
-        // Visit v reaches pixel x when (v + x) % 3 != 0, with weight 16·v + x + 1.
+        // Visit v reaches pixel x when (v + x) % 3 != 0, with weight (16·v + x + 1) / 1024
+        // (f16 holds it exactly).
         let weight = |v: usize, x: usize| {
             if !(v + x).is_multiple_of(3) {
-                (v * T + x + 1) as f32
+                (v * T + x + 1) as f32 / 1024.0
             } else {
                 0.0
             }
@@ -438,9 +457,10 @@ mod tests {
 
     #[test]
     fn simd_packs_match_portable() {
+        // Weights that round when stored, over the renderer's range (1 down to 1e-7).
         let weight = |v: usize, x: usize| {
             if (v * 7 + x * 3) % 5 < 2 {
-                (v * T + x + 1) as f32
+                ((v * T + x + 1) as f32 * 0.618034).fract() * 10f32.powi(-((v % 8) as i32))
             } else {
                 0.0
             }
@@ -459,10 +479,11 @@ mod tests {
     #[test]
     fn a_visit_reaching_every_pixel_fills_its_16_weights() {
         for simd in simds_here() {
-            let (_, lanes, weights, counts) = packed(3, |v, x| (v * 100 + x + 1) as f32, simd);
+            let weight = |v, x| (v * 100 + x + 1) as f32 / 1024.0;
+            let (_, lanes, weights, counts) = packed(3, weight, simd);
             assert!(lanes.iter().all(|&l| l & REACHED == REACHED));
             assert_eq!(weights.len(), 48);
-            assert_eq!(weights[47], 216.0);
+            assert_eq!(weights[47], 216.0 / 1024.0);
             assert_eq!(counts, [3; T]);
         }
     }

@@ -8,7 +8,7 @@ use crate::map::{Gaussian, GaussianMap};
 use crate::output::{RenderOutput, RenderRequest};
 use crate::reference::render_reference;
 use crate::render::render;
-use crate::Camera;
+use crate::{stored_weight, Camera};
 
 fn camera(near: f32) -> Camera {
     // Principal point on pixel (32, 24); identity pose: camera at origin looking down +z.
@@ -66,8 +66,27 @@ fn heaviest_first(tk: &crate::TopK, x: u32, y: u32) -> (Vec<u32>, Vec<f32>) {
     tk.pixel_sorted(x, y).into_iter().unzip()
 }
 
+/// Pixel (x, y)'s top-K as a set: by id.
+fn top_k_by_id(tk: &crate::TopK, x: u32, y: u32) -> Vec<(u32, f32)> {
+    let mut v: Vec<(u32, f32)> = tk.pixel(x, y).collect();
+    v.sort_by_key(|e| e.0);
+    v
+}
+
+/// A reference list as the top-K stores it (weights as f16), by id.
+fn stored_by_id(list: &[(u32, f32)]) -> Vec<(u32, f32)> {
+    let mut v: Vec<(u32, f32)> = list.iter().map(|&(id, w)| (id, stored_weight(w))).collect();
+    v.sort_by_key(|e| e.0);
+    v
+}
+
 fn close(a: f32, b: f32, tol: f32) -> bool {
     (a - b).abs() <= tol
+}
+
+/// A top-K weight (stored as f16: within a relative 2^-11) against its f32 value.
+fn close_weight(stored: f32, want: f32) -> bool {
+    (stored - want).abs() <= want.abs() * 2f32.powi(-11) + 1e-7
 }
 
 #[test]
@@ -100,7 +119,7 @@ fn single_gaussian_head_on_matches_hand_values() {
     let tk = o.top_k.as_ref().expect("asked for");
     let (ids, ws) = heaviest_first(tk, 32, 24);
     assert_eq!(ids, &[0]);
-    assert!(close(ws[0], 0.8, 1e-6));
+    assert!(close_weight(ws[0], 0.8));
     assert_eq!(tk.pixel(0, 0).count(), 0);
     let vis = o.visible_per_label.as_ref().expect("asked for");
     assert_eq!(vis.get(&7), Some(&1));
@@ -126,7 +145,7 @@ fn voted_label_flips_with_front_opacity() {
             vec![(0, w_front), (1, w_back)]
         };
         assert_eq!(ids, &[expect[0].0, expect[1].0]);
-        assert!(close(ws[0], expect[0].1, 1e-6) && close(ws[1], expect[1].1, 1e-6));
+        assert!(close_weight(ws[0], expect[0].1) && close_weight(ws[1], expect[1].1));
     }
 }
 
@@ -183,7 +202,7 @@ fn top_k_orders_by_weight_and_truncates() {
     let (ids, ws) = heaviest_first(r.output.top_k.as_ref().expect("asked"), 32, 24);
     assert_eq!(ids, &[1, 3, 0]);
     for (got, want) in ws.iter().zip([0.45f32, 0.216, 0.1]) {
-        assert!(close(*got, want, 1e-6), "{got} vs {want}");
+        assert!(close_weight(*got, want), "{got} vs {want}");
     }
     let r = render(&map, &camera(0.05), &RenderRequest::semantic(50));
     let (ids, _) = heaviest_first(r.output.top_k.as_ref().expect("asked"), 32, 24);
@@ -307,11 +326,10 @@ fn fast_matches_reference_on_random_scene() {
         let mut truncated = 0;
         for y in 0..k.height {
             for x in 0..k.width {
-                let (ids, ws) = heaviest_first(tk, x, y);
                 let want = &slow.top_k[(y * k.width + x) as usize];
-                let got: Vec<(u32, f32)> = ids.iter().copied().zip(ws.iter().copied()).collect();
-                assert_eq!(&got, want, "seed {seed} pixel ({x}, {y})");
-                truncated += (ids.len() == 8) as usize;
+                let got = top_k_by_id(tk, x, y);
+                assert_eq!(got, stored_by_id(want), "seed {seed} pixel ({x}, {y})");
+                truncated += (got.len() == 8) as usize;
             }
         }
         assert!(truncated > 0, "test should exercise truncation");
@@ -322,11 +340,9 @@ fn fast_matches_reference_on_random_scene() {
         // On-demand top-K replays give the same lists.
         let again = render(&map, &cam, &RenderRequest::color_depth());
         for (x, y) in [(0, 0), (35, 25), (71, 51), (10, 40), (60, 3)] {
-            let (ids, ws) = heaviest_first(tk, x, y);
-            let want: Vec<(u32, f32)> = ids.iter().copied().zip(ws.iter().copied()).collect();
             assert_eq!(
-                again.top_k_at(x, y, 8),
-                want,
+                stored_by_id(&again.top_k_at(x, y, 8)),
+                top_k_by_id(tk, x, y),
                 "seed {seed} pixel ({x}, {y})"
             );
         }
@@ -375,7 +391,7 @@ fn top_k_comes_front_to_back() {
         .pixel(32, 24)
         .unzip();
     assert_eq!(ids, &[0, 1, 3]);
-    assert!(close(ws[1], 0.45, 1e-6));
+    assert!(close_weight(ws[1], 0.45));
 }
 
 #[test]
@@ -405,7 +421,7 @@ fn top_k_of_a_long_list_matches_the_formula() {
         assert_eq!(ids.len(), k.min(40));
         for (j, (&id, &w)) in ids.iter().zip(&ws).enumerate() {
             assert_eq!(id, want[j].0, "k={k} position {j}");
-            assert!(close(w, want[j].1, 1e-6));
+            assert!(close_weight(w, want[j].1));
         }
     }
 }
@@ -512,10 +528,10 @@ fn crowded_rows_match_the_reference() {
     let mut truncated = 0;
     for y in 0..48 {
         for x in 0..64 {
-            let (ids, ws) = heaviest_first(tk, x, y);
-            let got: Vec<(u32, f32)> = ids.iter().copied().zip(ws.iter().copied()).collect();
-            assert_eq!(&got, &slow.top_k[(y * 64 + x) as usize], "pixel ({x}, {y})");
-            truncated += (ids.len() == 50) as usize;
+            let got = top_k_by_id(tk, x, y);
+            let want = stored_by_id(&slow.top_k[(y * 64 + x) as usize]);
+            assert_eq!(got, want, "pixel ({x}, {y})");
+            truncated += (got.len() == 50) as usize;
         }
     }
     assert!(truncated > 0, "the block's pixels should be truncated to K");
@@ -597,8 +613,8 @@ fn stack_matches_reference(count: usize) {
             for x in 0..64 {
                 let want = &slow.top_k[(y * 64 + x) as usize];
                 assert_eq!(
-                    &tk.pixel_sorted(x, y),
-                    want,
+                    top_k_by_id(tk, x, y),
+                    stored_by_id(want),
                     "portable {portable} pixel ({x}, {y})"
                 );
             }

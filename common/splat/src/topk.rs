@@ -1,6 +1,37 @@
 //! Top-K Gaussians per pixel by weight (the paper's G_topK): selection over a pixel's
 //! contributions, and the per-tile-row storage of the result.
 
+use half::f16;
+
+/// Stored weights are the f16 of weight × 2^12: f16 halves the store the renderer writes per
+/// contribution (its largest cost after the selection), and the scale makes every weight it
+/// keeps (≥ MIN_ALPHA · MIN_TRANSMITTANCE ≈ 3.9e-7, < 1) a normal f16, so each is within a
+/// relative 2^-11 of the f32 it was (the K are chosen on the f32s).
+pub const WEIGHT_SCALE: f32 = 4096.0;
+const _: () = assert!(
+    crate::blend::MIN_ALPHA * crate::blend::MIN_TRANSMITTANCE * WEIGHT_SCALE
+        >= f16::MIN_POSITIVE.to_f32_const()
+        && WEIGHT_SCALE < f16::MAX.to_f32_const(),
+    "every renderer weight must be a normal f16 once scaled"
+);
+
+/// A weight as the top-K stores it.
+#[inline(always)]
+pub fn store_weight(w: f32) -> f16 {
+    f16::from_f32(w * WEIGHT_SCALE)
+}
+
+/// A stored weight, back as f32.
+#[inline(always)]
+pub fn load_weight(h: f16) -> f32 {
+    h.to_f32() * (1.0 / WEIGHT_SCALE)
+}
+
+/// The weight the top-K gives back for `w`.
+pub fn stored_weight(w: f32) -> f32 {
+    load_weight(store_weight(w))
+}
+
 /// Sort key: larger weight first, then the front-most Gaussian (smaller tile rank) on ties.
 #[inline(always)]
 pub fn topk_key(weight: f32, rank: u32) -> u64 {
@@ -56,8 +87,9 @@ pub struct TopKBand {
     /// Per visit: bit x (x < 16) when pixel x of the row took a weight (stored in
     /// `weights`); bit 16 + x when that weight is among pixel x's K heaviest.
     pub lanes: Vec<u32>,
-    /// The visits' weights α·T, visit by visit, in lane order.
-    pub weights: Vec<f32>,
+    /// The visits' weights α·T ([stored](store_weight) as f16), visit by visit, in lane
+    /// order.
+    pub weights: Vec<f16>,
 }
 
 /// Bits 0..16 of a visit's `lanes`: the pixels it reached.
@@ -87,7 +119,7 @@ pub struct TopK {
 pub struct PixelEntries<'a> {
     ids: &'a [u32],
     lanes: &'a [u32],
-    weights: &'a [f32],
+    weights: &'a [f16],
     /// Bit of the pixel's kept lane.
     kept: u32,
     /// The reached lanes before the pixel's (its weight's place in a visit).
@@ -107,7 +139,7 @@ impl Iterator for PixelEntries<'_> {
             self.w += (l & REACHED).count_ones() as usize;
             if l & self.kept != 0 {
                 let at = w + (l & self.before).count_ones() as usize;
-                return Some((self.ids[v], self.weights[at]));
+                return Some((self.ids[v], load_weight(self.weights[at])));
             }
         }
         None
@@ -122,7 +154,8 @@ impl TopK {
         (((y / T) * self.tiles_x + x / T) * T + y % T) as usize
     }
 
-    /// Pixel (x, y)'s top-K (Gaussian id, weight α·T), front to back.
+    /// Pixel (x, y)'s top-K (Gaussian id, weight α·T as [stored](stored_weight)), front to
+    /// back.
     pub fn pixel(&self, x: u32, y: u32) -> PixelEntries<'_> {
         assert!(
             x < self.width && y < self.height,
@@ -157,7 +190,8 @@ impl TopK {
     }
 
     /// A top-K holding the given per-pixel lists (row-major, front to back), each kept whole
-    /// (K = the longest): one visit per entry. For tests and tools.
+    /// (K = the longest): one visit per entry, weights (in (0, 15]) [stored](stored_weight).
+    /// For tests and tools.
     pub fn from_lists(width: u32, height: u32, lists: &[Vec<(u32, f32)>]) -> Self {
         assert_eq!(
             lists.len(),
@@ -191,9 +225,10 @@ impl TopK {
                             continue;
                         }
                         for &(id, w) in &lists[(y * width + x) as usize] {
+                            assert!(w > 0.0 && w <= 15.0, "top-K weight {w} outside (0, 15]");
                             band.ids.push(id);
                             band.lanes.push((1 << lane) | (1 << (KEPT_SHIFT + lane)));
-                            band.weights.push(w);
+                            band.weights.push(store_weight(w));
                             span.len += 1;
                         }
                     }
@@ -253,14 +288,17 @@ mod tests {
 
     /// A 20×3 top-K by hand: one band, two tiles. Tile row 0 of tile 0 has three visits:
     /// Gaussian 7 reaching pixels 0, 2 (weights 0.5, 0.25), Gaussian 8 reaching pixel 2
-    /// (0.125, dropped from its top-K), Gaussian 9 reaching pixels 0, 1, 2 (0.1, 0.2, 0.3).
+    /// (0.125, dropped from its top-K), Gaussian 9 reaching pixels 0, 1, 2 (0.0625, 0.1875,
+    /// 0.375). (Sums of powers of two: f16 holds them exactly.)
     fn by_hand() -> TopK {
         let mut t = TopK::from_lists(20, 3, &vec![Vec::new(); 60]);
         t.k = 2;
         let band = &mut t.bands[0];
         band.ids = vec![7, 8, 9];
         band.lanes = vec![0b101 | (0b101 << 16), 0b100, 0b111 | (0b111 << 16)];
-        band.weights = vec![0.5, 0.25, 0.125, 0.1, 0.2, 0.3];
+        band.weights = [0.5, 0.25, 0.125, 0.0625, 0.1875, 0.375]
+            .map(store_weight)
+            .to_vec();
         t.rows[0] = RowSpan {
             visits: 0,
             len: 3,
@@ -273,11 +311,11 @@ mod tests {
     #[test]
     fn pixels_read_their_lanes_of_each_visit() {
         let t = by_hand();
-        assert_eq!(t.pixel(0, 0).collect::<Vec<_>>(), [(7, 0.5), (9, 0.1)]);
-        assert_eq!(t.pixel(1, 0).collect::<Vec<_>>(), [(9, 0.2)]);
+        assert_eq!(t.pixel(0, 0).collect::<Vec<_>>(), [(7, 0.5), (9, 0.0625)]);
+        assert_eq!(t.pixel(1, 0).collect::<Vec<_>>(), [(9, 0.1875)]);
         // Gaussian 8's weight is stored (it shifts 9's) but not in pixel 2's top-K.
-        assert_eq!(t.pixel(2, 0).collect::<Vec<_>>(), [(7, 0.25), (9, 0.3)]);
-        assert_eq!(t.pixel_sorted(2, 0), [(9, 0.3), (7, 0.25)]);
+        assert_eq!(t.pixel(2, 0).collect::<Vec<_>>(), [(7, 0.25), (9, 0.375)]);
+        assert_eq!(t.pixel_sorted(2, 0), [(9, 0.375), (7, 0.25)]);
         assert_eq!(t.pixel(3, 0).count(), 0);
         assert_eq!(t.pixel(19, 2).count(), 0);
         assert_eq!(t.entries(), 5);
@@ -291,8 +329,8 @@ mod tests {
         old_to_new[9] = Some(4);
         old_to_new[8] = Some(3);
         t.remap(&old_to_new);
-        assert_eq!(t.pixel(0, 0).collect::<Vec<_>>(), [(4, 0.1)]);
-        assert_eq!(t.pixel(2, 0).collect::<Vec<_>>(), [(4, 0.3)]);
+        assert_eq!(t.pixel(0, 0).collect::<Vec<_>>(), [(4, 0.0625)]);
+        assert_eq!(t.pixel(2, 0).collect::<Vec<_>>(), [(4, 0.375)]);
         assert_eq!(t.count[..3], [1, 1, 1]);
         assert_eq!(t.entries(), 3);
     }
@@ -314,8 +352,31 @@ mod tests {
         for y in 0..h {
             for x in 0..w {
                 let got: Vec<(u32, f32)> = t.pixel(x, y).collect();
-                assert_eq!(got, lists[(y * w + x) as usize], "({x}, {y})");
+                let want: Vec<(u32, f32)> = lists[(y * w + x) as usize]
+                    .iter()
+                    .map(|&(id, w)| (id, stored_weight(w)))
+                    .collect();
+                assert_eq!(got, want, "({x}, {y})");
             }
         }
+    }
+
+    #[test]
+    fn stored_weights_are_within_2_pow_minus_11_over_the_renderers_range() {
+        // From the smallest weight the renderer keeps up to 1, 64 steps per octave.
+        let lo = crate::blend::MIN_ALPHA * crate::blend::MIN_TRANSMITTANCE;
+        let mut w = lo;
+        let mut worst = 0.0f64;
+        while w < 1.0 {
+            let rel = ((stored_weight(w) as f64 - w as f64) / w as f64).abs();
+            worst = worst.max(rel);
+            w *= 2f32.powf(1.0 / 64.0);
+        }
+        assert!(worst <= 2f64.powi(-11), "worst relative error {worst}");
+        assert!(worst > 2f64.powi(-13), "f16 rounding should show: {worst}");
+        // Powers of two are exact; the order of distinct f16s is kept.
+        assert_eq!(stored_weight(0.5), 0.5);
+        assert!(stored_weight(lo) > 0.0);
+        assert!(stored_weight(0.3) < stored_weight(0.31));
     }
 }
