@@ -189,7 +189,6 @@ impl RowLog {
             dst.ids.len() >= n && dst.lanes.len() >= n && dst.weights.len() >= T * n,
             "pack: room for {n} visits"
         );
-        dst.ids[..n].copy_from_slice(&self.g[y]);
         match simd {
             #[cfg(target_arch = "x86_64")]
             // SAFETY: the caller passes Avx512 only after detecting AVX-512 F and POPCNT.
@@ -204,7 +203,9 @@ impl RowLog {
     fn pack_portable(&self, y: usize, dst: PackDst) -> Packed {
         let mut counts = [0u32; T];
         let mut at = 0;
-        for (wv, lanes) in self.w[y].iter().zip(dst.lanes.iter_mut()) {
+        let ids = dst.ids.iter_mut().zip(&self.g[y]);
+        for ((wv, lanes), (id, &g)) in self.w[y].iter().zip(dst.lanes.iter_mut()).zip(ids) {
+            *id = g;
             let mut m = 0u32;
             // Branch-free: every lane is written, only contributions advance (at < 16·n).
             for (x, (&w, c)) in wv.iter().zip(&mut counts).enumerate() {
@@ -237,7 +238,10 @@ impl RowLog {
         let mut counts = _mm512_setzero_si512();
         let out = dst.weights.as_mut_ptr().cast::<u16>();
         let mut at = 0usize;
-        for (wv, lanes) in self.w[y].iter().zip(dst.lanes.iter_mut()) {
+        // The ids are copied in the loop: a memcpy call per row cost more (rows are short).
+        let ids = dst.ids.iter_mut().zip(&self.g[y]);
+        for ((wv, lanes), (id, &g)) in self.w[y].iter().zip(dst.lanes.iter_mut()).zip(ids) {
+            *id = g;
             // SAFETY: 16 weights of the visit.
             let w = unsafe { _mm512_loadu_ps(wv.as_ptr()) };
             let m = _mm512_cmp_ps_mask::<_CMP_GT_OQ>(w, zero);
@@ -275,7 +279,9 @@ impl RowLog {
         let mut counts = [_mm256_setzero_si256(); 2];
         let out = dst.weights.as_mut_ptr().cast::<u16>();
         let mut at = 0usize;
-        for (wv, lanes) in self.w[y].iter().zip(dst.lanes.iter_mut()) {
+        let ids = dst.ids.iter_mut().zip(&self.g[y]);
+        for ((wv, lanes), (id, &g)) in self.w[y].iter().zip(dst.lanes.iter_mut()).zip(ids) {
+            *id = g;
             let mut m = 0u32;
             for (h, counts) in counts.iter_mut().enumerate() {
                 // SAFETY: 8 of the visit's 16 weights, from 8·h.
