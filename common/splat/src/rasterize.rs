@@ -572,7 +572,8 @@ fn blend_row(
 }
 
 /// Weights (tile rank, α·T) of one pixel's contributions, front to back: the kernel's
-/// arithmetic replayed for a single pixel (list / vote-slot overflow, on-demand top-K).
+/// arithmetic replayed for a single pixel (voting rows that met more labels than their table
+/// holds when no log was kept; on-demand top-K).
 pub(crate) fn replay_pixel(
     p: &Projected,
     list: &[u32],

@@ -3,7 +3,7 @@
 //! per label, a 16-lane vector of summed weights (0 where a pixel never took that label). A
 //! visit is one table lookup and one vector add; the winner per pixel is a few vector
 //! compares at the end of the tile. Rows meeting more labels than the table holds are marked
-//! and their pixels voted exactly by the caller (from their lists, or a replay). Most tiles
+//! and their pixels voted exactly by the caller (from their log columns, or a replay). Most tiles
 //! meet one label (77 % in the benchmark scene): until a second one comes, nothing is
 //! summed at all, since the silhouette is that label's sum.
 

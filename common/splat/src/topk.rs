@@ -4,16 +4,19 @@
 use half::f16;
 
 /// Stored weights are the f16 of weight × 2^12: f16 halves the bytes the renderer stores per
-/// contribution (a 640×480 top-K: 16 MB instead of 25; (b) renders 3–5 ms faster per three
+/// contribution (a 640×480 top-K: 16 MB instead of 25; (b) renders 4–5 ms faster per three
 /// frames on one thread), and the scale makes every weight it keeps (≥ MIN_ALPHA ·
 /// MIN_TRANSMITTANCE ≈ 3.9e-7, < 1) a normal f16, so each is within a relative 2^-11 of the
 /// f32 it was. The K are chosen on the f32s.
 pub const WEIGHT_SCALE: f32 = 4096.0;
+/// Largest weight the store holds (renderer weights are below 1; [`TopK::from_lists`] takes
+/// up to this).
+const MAX_STORED_WEIGHT: f32 = 15.0;
 const _: () = assert!(
     crate::blend::MIN_ALPHA * crate::blend::MIN_TRANSMITTANCE * WEIGHT_SCALE
         >= f16::MIN_POSITIVE.to_f32_const()
-        && WEIGHT_SCALE < f16::MAX.to_f32_const(),
-    "every renderer weight must be a normal f16 once scaled"
+        && MAX_STORED_WEIGHT * WEIGHT_SCALE <= f16::MAX.to_f32_const(),
+    "every stored weight must be a normal f16 once scaled"
 );
 
 /// A weight as the top-K stores it.
@@ -79,7 +82,7 @@ pub struct RowSpan {
 /// The top-K of one band of 16 image rows, stored as the renderer met it: per tile row, its
 /// visits front to back (a Gaussian compositing onto some of the row's 16 pixels), each with
 /// the weights of the pixels it reached. A pixel's top-K are the visits whose kept bit for
-/// its lane is set. Writing a visit is one compressed vector store; per-pixel lists cost the
+/// its lane is set. Writing a visit is one compress and vector store; per-pixel lists cost the
 /// renderer a transpose and two stores per 16 visits and pixel, most of the top-K's price.
 #[derive(Debug, Clone, Default)]
 pub struct TopKBand {
@@ -226,7 +229,10 @@ impl TopK {
                             continue;
                         }
                         for &(id, w) in &lists[(y * width + x) as usize] {
-                            assert!(w > 0.0 && w <= 15.0, "top-K weight {w} outside (0, 15]");
+                            assert!(
+                                w > 0.0 && w <= MAX_STORED_WEIGHT,
+                                "top-K weight {w} outside (0, {MAX_STORED_WEIGHT}]"
+                            );
                             band.ids.push(id);
                             band.lanes.push((1 << lane) | (1 << (KEPT_SHIFT + lane)));
                             band.weights.push(store_weight(w));
