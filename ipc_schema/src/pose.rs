@@ -6,23 +6,34 @@ use crate::{MessageKind, SchemaError, Stamp};
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[repr(u32)]
 pub enum PoseStatus {
+    /// Registered and verified.
     Tracked = 0,
-    /// Registration failed; the pose is a constant-velocity guess.
+    /// Lost: too few depth samples; the pose is the last verified one.
     TooFewPoints = 1,
-    NotConverged = 2,
+    /// Lost: registration failed or was not trusted; the pose is the last verified one.
+    Lost = 2,
+    /// Lost: no depth at all; the pose is the last verified one.
     NoDepth = 3,
     /// The first frame: pose set by convention (identity or ground truth).
     Initial = 4,
+    /// Verified again after lost frames.
+    Relocalised = 5,
 }
 
 impl PoseStatus {
+    /// Whether the pose is trustworthy (set for the first frame, or verified).
+    pub fn has_pose(self) -> bool {
+        matches!(self, Self::Tracked | Self::Initial | Self::Relocalised)
+    }
+
     pub fn from_u32(v: u32) -> Option<Self> {
         Some(match v {
             0 => Self::Tracked,
             1 => Self::TooFewPoints,
-            2 => Self::NotConverged,
+            2 => Self::Lost,
             3 => Self::NoDepth,
             4 => Self::Initial,
+            5 => Self::Relocalised,
             _ => return None,
         })
     }

@@ -1,7 +1,8 @@
-use crate::covariance::sample_covariance;
-use crate::covariance::{estimate_covariances, Regularization};
-use crate::{estimate_covariances_on_grid, DepthSamples, GicpError};
-use nalgebra::{Isometry3, Matrix3, Point3, SymmetricEigen};
+use crate::covariance::{
+    covariance_from_gaussian, estimate_covariances, regularize, sample_covariance, Regularization,
+};
+use crate::{estimate_covariances_on_grid, DepthSamples, Gaussian, GicpError};
+use nalgebra::{Isometry3, Matrix3, Point3, Quaternion, SymmetricEigen, UnitQuaternion};
 
 /// Points with one covariance each: a GICP source, or the content of a target.
 #[derive(Debug, Clone, Default)]
@@ -38,6 +39,38 @@ impl Cloud {
         })
     }
 
+    /// The map's Gaussians as points: mean, covariance `R S² Rᵀ` regularised like
+    /// the source so both sides have comparable scale.
+    pub fn from_gaussians(
+        gaussians: &[Gaussian],
+        regularization: Regularization,
+    ) -> Result<Self, GicpError> {
+        let mut points = Vec::with_capacity(gaussians.len());
+        let mut covariances = Vec::with_capacity(gaussians.len());
+        for (i, g) in gaussians.iter().enumerate() {
+            let [w, x, y, z] = g.rotation;
+            let q = Quaternion::new(w, x, y, z);
+            let finite = q
+                .coords
+                .iter()
+                .chain(g.scale.iter())
+                .chain(g.mean.coords.iter())
+                .all(|v| v.is_finite());
+            if !finite || q.norm() < 1e-12 {
+                return Err(GicpError::Invalid(format!(
+                    "Gaussian {i} has a non-finite value or a zero quaternion"
+                )));
+            }
+            let cov = covariance_from_gaussian(&UnitQuaternion::from_quaternion(q), &g.scale);
+            points.push(g.mean);
+            covariances.push(regularize(&cov, regularization));
+        }
+        Ok(Self {
+            points,
+            covariances,
+        })
+    }
+
     /// Points whose covariances are already known (e.g. from Gaussians).
     pub fn from_parts(
         points: Vec<Point3<f64>>,
@@ -56,8 +89,37 @@ impl Cloud {
         self.points.len()
     }
 
+    /// `Ok` unless the cloud is empty, tiny, non-finite or collinear (`what` names it).
+    pub fn check_registrable(&self, what: &'static str) -> Result<(), GicpError> {
+        check_registrable(what, &self.points)
+    }
+
     pub fn is_empty(&self) -> bool {
         self.points.is_empty()
+    }
+
+    /// One point per occupied cubic voxel of side `voxel` (the first met, with its own
+    /// covariance): a coarse cloud for the wide first stages of coarse-to-fine registration.
+    /// `voxel ≤ 0` (or NaN) keeps every point.
+    pub fn voxel_subsample(&self, voxel: f64) -> Self {
+        if voxel.is_nan() || voxel <= 0.0 {
+            return self.clone();
+        }
+        let inv = 1.0 / voxel;
+        let mut seen = std::collections::HashSet::with_capacity(self.len() / 4);
+        let mut out = Self::default();
+        for (p, c) in self.points.iter().zip(&self.covariances) {
+            let key = [
+                (p.x * inv).floor() as i64,
+                (p.y * inv).floor() as i64,
+                (p.z * inv).floor() as i64,
+            ];
+            if seen.insert(key) {
+                out.points.push(*p);
+                out.covariances.push(*c);
+            }
+        }
+        out
     }
 
     /// The cloud seen from another frame: `p ↦ T p`, `Σ ↦ R Σ Rᵀ`.
@@ -107,4 +169,27 @@ pub(crate) fn check_registrable(
         )));
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn voxel_subsample_keeps_the_first_point_of_each_voxel_with_its_covariance() {
+        let points = vec![
+            Point3::new(0.01, 0.01, 0.01),
+            Point3::new(0.04, 0.02, 0.0),
+            Point3::new(0.06, 0.0, 0.0),
+            Point3::new(-0.01, 0.0, 0.0),
+        ];
+        let covariances = (1..=4).map(|i| Matrix3::identity() * i as f64).collect();
+        let cloud = Cloud::from_parts(points, covariances).expect("same length");
+        let coarse = cloud.voxel_subsample(0.05);
+        assert_eq!(coarse.len(), 3);
+        assert_eq!(coarse.points[0], Point3::new(0.01, 0.01, 0.01));
+        assert_eq!(coarse.covariances[1], Matrix3::identity() * 3.0);
+        assert_eq!(coarse.points[2], Point3::new(-0.01, 0.0, 0.0));
+        assert_eq!(cloud.voxel_subsample(0.0).len(), 4);
+    }
 }

@@ -11,7 +11,9 @@
 //!    hashed [`NeighbourGrid`] for fast radius-bounded correspondences),
 //!    and grows with [`Target::add_transformed`] at keyframes,
 //! 4. [`register`] runs Gauss-Newton or Levenberg-Marquardt on SE(3) and
-//!    reports the pose, fit statistics and the keyframe overlap fraction.
+//!    reports the pose, fit statistics and the keyframe overlap fraction;
+//!    [`register_coarse_to_fine`] runs it wide on a coarse [`CoarseToFineTarget`]
+//!    first, so jumps of 10 cm and 5° between frames converge.
 //!
 //! Threads: everything parallel runs on the current rayon pool; wrap calls
 //! in `pool.install(..)` of a local `rayon::ThreadPool` to bound them.
@@ -23,6 +25,7 @@
 pub mod bench;
 mod cloud;
 pub mod cloud_io;
+mod coarse_to_fine;
 mod config;
 mod covariance;
 mod error;
@@ -38,6 +41,7 @@ mod target;
 mod voxel;
 
 pub use cloud::Cloud;
+pub use coarse_to_fine::{register_coarse_to_fine, CoarseToFine, CoarseToFineTarget, Stage};
 pub use config::{RegistrationConfig, Solver};
 pub use covariance::{
     covariance_from_gaussian, estimate_covariances, regularize, Regularization, DEFAULT_NEIGHBOURS,

@@ -25,6 +25,9 @@ pub struct Registration {
     pub overlap: f64,
     /// Final summed Mahalanobis error `Σ dᵀ Ω d`.
     pub error: f64,
+    /// Smallest ÷ largest eigenvalue of `H` at the last linearisation: near 0 when some
+    /// motion (sliding along a wall, turning about a pole) is barely constrained.
+    pub conditioning: f64,
 }
 
 /// Source points handled by one parallel task.
@@ -131,6 +134,7 @@ pub fn register(
         return Err(GicpError::Degenerate("the solution is not finite".into()));
     }
     let n = source.len() as f64;
+    let conditioning = eigenvalue_ratio(&last.h);
     Ok(Registration {
         transform,
         iterations,
@@ -140,6 +144,7 @@ pub fn register(
         inlier_rmse: (last.inlier_sq_dist / last.inliers.max(1) as f64).sqrt(),
         overlap: last.overlapping as f64 / n,
         error: last.error,
+        conditioning,
     })
 }
 
@@ -268,6 +273,17 @@ fn lm_step(
         *lambda *= config.lm_lambda_factor;
     }
     Ok(None)
+}
+
+/// Smallest ÷ largest eigenvalue of a symmetric `H` (0 when not positive).
+fn eigenvalue_ratio(h: &Matrix6<f64>) -> f64 {
+    let eigenvalues = SymmetricEigen::new(*h).eigenvalues;
+    let (min, max) = (eigenvalues.min(), eigenvalues.max());
+    if max.is_finite() && max > 0.0 && min > 0.0 {
+        min / max
+    } else {
+        0.0
+    }
 }
 
 /// Rank check of `H`: a null direction means the pose is not observable.

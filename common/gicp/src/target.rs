@@ -1,7 +1,7 @@
 use crate::cloud::check_registrable;
-use crate::covariance::{covariance_from_gaussian, regularize, Regularization};
+use crate::covariance::Regularization;
 use crate::{Cloud, GicpError, NeighbourGrid, PointTree};
-use nalgebra::{Isometry3, Matrix3, Point3, Quaternion, UnitQuaternion, Vector3};
+use nalgebra::{Isometry3, Matrix3, Point3, Vector3};
 use std::sync::OnceLock;
 
 /// One map Gaussian as the tracker sees it (METHOD §7: mean, rotation, scale).
@@ -67,33 +67,12 @@ impl Target {
         )?))
     }
 
-    /// A target from the map's Gaussians: covariance `R S² Rᵀ`, optionally
-    /// regularised like the source so both sides have comparable scale.
+    /// A target from the map's Gaussians ([`Cloud::from_gaussians`]).
     pub fn from_gaussians(
         gaussians: &[Gaussian],
         regularization: Regularization,
     ) -> Result<Self, GicpError> {
-        let mut points = Vec::with_capacity(gaussians.len());
-        let mut covariances = Vec::with_capacity(gaussians.len());
-        for (i, g) in gaussians.iter().enumerate() {
-            let [w, x, y, z] = g.rotation;
-            let q = Quaternion::new(w, x, y, z);
-            let finite = q
-                .coords
-                .iter()
-                .chain(g.scale.iter())
-                .chain(g.mean.coords.iter())
-                .all(|v| v.is_finite());
-            if !finite || q.norm() < 1e-12 {
-                return Err(GicpError::Invalid(format!(
-                    "Gaussian {i} has a non-finite value or a zero quaternion"
-                )));
-            }
-            let cov = covariance_from_gaussian(&UnitQuaternion::from_quaternion(q), &g.scale);
-            points.push(g.mean);
-            covariances.push(regularize(&cov, regularization));
-        }
-        Ok(Self::new(Cloud::from_parts(points, covariances)?))
+        Ok(Self::new(Cloud::from_gaussians(gaussians, regularization)?))
     }
 
     /// Appends points already in the target frame, then rebuilds the tree.

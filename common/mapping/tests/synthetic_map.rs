@@ -3,7 +3,7 @@
 use opengs_datasets::{open_dataset, DatasetSpec};
 use opengs_mapping::{DensifyInput, Mapper, MapperConfig, StoredKeyframe};
 use opengs_splat::{render, RenderRequest};
-use opengs_tracking::{FrameTracker, TrackerConfig};
+use opengs_tracking::{DepthFrame, FrameTracker, TrackerConfig};
 
 fn psnr(kf: &StoredKeyframe, mapper: &Mapper) -> f64 {
     let out = render(mapper.map(), &kf.camera, &RenderRequest::color_depth()).output;
@@ -34,7 +34,12 @@ fn keyframes_become_gaussians_and_optimisation_raises_psnr() {
     let mut first_kf = None;
     for i in 0..40 {
         let f = source.frame(i).expect("frame");
-        let out = tracker.track(&f.depth, f.depth_scale as f64, &k);
+        let out = tracker.track(&DepthFrame {
+            depth: &f.depth,
+            depth_scale: f.depth_scale as f64,
+            intrinsics: &k,
+            timestamp: f.timestamp,
+        });
         let (Some(_), Some(cloud)) = (out.keyframe, out.world_cloud()) else {
             continue;
         };

@@ -11,8 +11,11 @@ const MAX_DT: f64 = 0.005;
 
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 pub struct RunMetrics {
+    /// Frames with a verified pose (`trajectory.txt`).
     pub frames: usize,
-    /// ATE after rigid (no-scale) Umeyama alignment, METHOD §9.
+    /// Frames without one (`lost.txt`): tracking was lost, or the frame had no depth.
+    pub frames_lost: usize,
+    /// ATE after rigid (no-scale) Umeyama alignment over the verified poses, METHOD §9.
     pub ate_rmse_cm: Option<f64>,
     pub ate_mean_cm: Option<f64>,
     pub ate_max_cm: Option<f64>,
@@ -23,8 +26,18 @@ pub fn evaluate_run(run_dir: &Path) -> anyhow::Result<RunMetrics> {
     let traj_path = run_dir.join("trajectory.txt");
     let estimated = read_tum_trajectory(&traj_path)?;
     let gt_path = run_dir.join("groundtruth.txt");
+    let lost_path = run_dir.join(crate::recorder::LOST_FRAMES);
+    let frames_lost = match std::fs::read_to_string(&lost_path) {
+        Ok(text) => text
+            .lines()
+            .filter(|l| !l.trim().is_empty() && !l.starts_with('#'))
+            .count(),
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => 0,
+        Err(e) => anyhow::bail!("{}: {e}", lost_path.display()),
+    };
     let mut metrics = RunMetrics {
         frames: estimated.len(),
+        frames_lost,
         ate_rmse_cm: None,
         ate_mean_cm: None,
         ate_max_cm: None,

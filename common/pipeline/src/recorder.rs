@@ -1,4 +1,5 @@
-//! The run recorder: collects every pose the tracker publishes and writes the trajectory.
+//! The run recorder: collects every pose the tracker publishes and writes the trajectory
+//! (verified poses only) and the lost frames.
 
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -6,6 +7,9 @@ use std::path::Path;
 use opengs_eval::{write_tum_trajectory, TimedPose, TrajectoryError};
 use opengs_geometry::{pose_from_tum, Pose};
 use opengs_ipc_schema::{PoseHeader, PoseStatus};
+
+/// Frames without a verified pose, one per line (`timestamp seq status`).
+pub const LOST_FRAMES: &str = "lost.txt";
 
 /// One tracked frame.
 #[derive(Debug, Clone)]
@@ -59,14 +63,24 @@ impl Recorder {
         self.frames.values().filter(|f| f.keyframe).count()
     }
 
-    pub fn failures(&self) -> usize {
+    /// Frames whose pose was not verified (the tracker was lost, or had no depth).
+    pub fn lost(&self) -> usize {
         self.frames
             .values()
-            .filter(|f| !matches!(f.status, PoseStatus::Tracked | PoseStatus::Initial))
+            .filter(|f| !f.status.has_pose())
             .count()
     }
 
-    /// Writes `trajectory.txt` (and `groundtruth.txt` when known) in TUM format.
+    /// Frames where tracking resumed after lost frames.
+    pub fn relocalised(&self) -> usize {
+        self.frames
+            .values()
+            .filter(|f| f.status == PoseStatus::Relocalised)
+            .count()
+    }
+
+    /// Writes `trajectory.txt` (verified poses) and `groundtruth.txt` (every frame, when
+    /// known) in TUM format, and `lost.txt` (the frames without a verified pose).
     pub fn write(&self, dir: &Path) -> Result<(), TrajectoryError> {
         let timed = |pose: &Pose, timestamp: f64| TimedPose {
             timestamp,
@@ -75,9 +89,19 @@ impl Recorder {
         let estimated: Vec<TimedPose> = self
             .frames
             .values()
+            .filter(|f| f.status.has_pose())
             .map(|f| timed(&f.pose, f.timestamp))
             .collect();
         write_tum_trajectory(&dir.join("trajectory.txt"), &estimated)?;
+        let lost_path = dir.join(LOST_FRAMES);
+        let mut lost = String::from("# frames without a verified pose: timestamp seq status\n");
+        for (seq, f) in self.frames.iter().filter(|(_, f)| !f.status.has_pose()) {
+            lost.push_str(&format!("{:.6} {seq} {:?}\n", f.timestamp, f.status));
+        }
+        std::fs::write(&lost_path, lost).map_err(|error| TrajectoryError::Io {
+            path: lost_path,
+            error,
+        })?;
         let gt: Vec<TimedPose> = self
             .frames
             .values()

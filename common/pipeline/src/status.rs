@@ -20,13 +20,18 @@ pub struct PipelineStatus {
     pub out_dir: String,
     pub elapsed_s: f64,
     pub stages: Vec<StageStatus>,
+    /// Poses received, and how many of them are lost frames (no verified pose).
+    #[serde(default)]
+    pub poses: usize,
+    #[serde(default)]
+    pub lost_frames: usize,
 }
 
 impl PipelineStatus {
     pub fn table(&self) -> String {
         let mut s = format!(
-            "run {}  ({:.1} s)  {}\n",
-            self.run_id, self.elapsed_s, self.out_dir
+            "run {}  ({:.1} s)  {}\nposes {}, lost frames {}\n",
+            self.run_id, self.elapsed_s, self.out_dir, self.poses, self.lost_frames
         );
         s.push_str(&format!(
             "{:<12} {:<12} {:>8} {:<11} {:>8} {:>10} {:>9}\n",

@@ -49,7 +49,9 @@ pub struct RunSummary {
     pub frames_published: u64,
     pub poses: usize,
     pub keyframes: usize,
-    pub tracking_failures: usize,
+    /// Frames without a verified pose, and relocalisations after them.
+    pub lost_frames: usize,
+    pub relocalisations: usize,
     pub elapsed_s: f64,
     /// Seconds until the data ended (or the run stopped), without the stages' final work.
     pub streaming_s: f64,
@@ -175,7 +177,8 @@ impl Supervisor {
             frames_published: state.stage_processed("sensor"),
             poses: state.recorder.len(),
             keyframes: state.recorder.keyframes(),
-            tracking_failures: state.recorder.failures(),
+            lost_frames: state.recorder.lost(),
+            relocalisations: state.recorder.relocalised(),
             elapsed_s: started.elapsed().as_secs_f64(),
             streaming_s: streaming_s.unwrap_or_else(|| started.elapsed().as_secs_f64()),
             latency,
@@ -648,6 +651,8 @@ impl RunState {
                     kind: s.spec.kind.clone(),
                 })
                 .collect(),
+            poses: self.recorder.len(),
+            lost_frames: self.recorder.lost(),
         }
     }
 

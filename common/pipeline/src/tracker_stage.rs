@@ -1,7 +1,7 @@
 //! The tracker stage: frames in, a pose for every frame and keyframes out.
 
 use opengs_geometry::{pose_from_tum, pose_to_tum, Intrinsics};
-use opengs_gicp::{Gaussian, Target};
+use opengs_gicp::Gaussian;
 use opengs_ipc_schema::service::{FRAMES, KEYFRAMES, MAP_TARGET, POSES};
 use opengs_ipc_schema::{
     now_ns, FrameHeader, FrameView, KeyframeHeader, KeyframeParts, MapTargetHeader, MessageKind,
@@ -10,7 +10,9 @@ use opengs_ipc_schema::{
 use opengs_runtime::{
     waitset, CallbackProgression, Inlet, Outlet, RunContext, TelemetrySink, WaitSetRunResult,
 };
-use opengs_tracking::{FrameTracker, TrackOutcome, TrackStatus, TrackerConfig};
+use opengs_tracking::{
+    DepthFrame, FrameTracker, ModelUpdate, TrackOutcome, TrackStatus, TrackerConfig,
+};
 
 /// Options of the tracker stage.
 #[derive(clap::Args, Debug, Clone)]
@@ -30,8 +32,9 @@ fn status_of(s: TrackStatus) -> PoseStatus {
     match s {
         TrackStatus::Initial => PoseStatus::Initial,
         TrackStatus::Tracked => PoseStatus::Tracked,
+        TrackStatus::Relocalised => PoseStatus::Relocalised,
+        TrackStatus::Lost => PoseStatus::Lost,
         TrackStatus::TooFewPoints => PoseStatus::TooFewPoints,
-        TrackStatus::NotConverged => PoseStatus::NotConverged,
         TrackStatus::NoDepth => PoseStatus::NoDepth,
     }
 }
@@ -46,7 +49,8 @@ struct TrackerStage {
 }
 
 impl TrackerStage {
-    /// Switches the tracker's target to the map's trackable Gaussians (METHOD §7).
+    /// Hands the map's trackable Gaussians to the tracker (METHOD §7); its model is rebuilt
+    /// on the tracker's model thread and used from the frame after it is ready.
     fn handle_map_target(&mut self, h: &MapTargetHeader, payload: &[u8]) {
         let view = match h.decode(payload) {
             Ok(v) => v,
@@ -69,25 +73,13 @@ impl TrackerStage {
                 scale: [s[0] as f64, s[1] as f64, s[2] as f64].into(),
             })
             .collect();
-        let regularization = tracker.config().regularization;
-        match self
-            .pool
-            .install(|| Target::from_gaussians(&gaussians, regularization))
-        {
-            Ok(target) if target.check_registrable().is_ok() => {
-                tracing::info!(
-                    "tracking against map v{} ({} Gaussians)",
-                    h.map_version,
-                    gaussians.len()
-                );
-                tracker.set_target(target);
-            }
-            Ok(_) => tracing::warn!(
-                "map v{} cannot fix a pose yet; keeping the current model",
-                h.map_version
-            ),
-            Err(e) => tracing::error!("map v{}: {e}", h.map_version),
-        }
+        tracing::debug!(
+            "map v{} as of keyframe #{} ({} Gaussians) to the model thread",
+            h.map_version,
+            h.stamp.seq,
+            gaussians.len()
+        );
+        tracker.set_map(h.stamp.seq, gaussians);
     }
 
     fn handle(&mut self, h: &FrameHeader, payload: &[u8]) -> anyhow::Result<()> {
@@ -103,21 +95,26 @@ impl TrackerStage {
         let [fx, fy, cx, cy] = h.intrinsics;
         let k = Intrinsics::new(fx, fy, cx, cy, h.width, h.height);
         let gt_first = self.gt_first_pose;
-        let tracker = self.tracker.get_or_insert_with(|| {
-            let mut t = FrameTracker::new(TrackerConfig::for_width(h.width));
+        if self.tracker.is_none() {
+            let mut t = FrameTracker::with_background_model(TrackerConfig::for_width(h.width))?;
             if gt_first && h.has_gt() {
                 if let Ok(p) = pose_from_tum(&h.gt_pose) {
                     t.set_first_pose(p);
                 }
             }
-            t
-        });
-        let out = self
-            .pool
-            .install(|| tracker.track(view.depth, h.depth_scale as f64, &k));
-        if let Some(why) = &out.failure {
-            tracing::warn!("frame #{}: {:?} ({why})", h.stamp.seq, out.status);
+            self.tracker = Some(t);
         }
+        let Some(tracker) = self.tracker.as_mut() else {
+            return Ok(());
+        };
+        let frame = DepthFrame {
+            depth: view.depth,
+            depth_scale: h.depth_scale as f64,
+            intrinsics: &k,
+            timestamp: h.stamp.capture_ns as f64 * 1e-9,
+        };
+        let out = self.pool.install(|| tracker.track(&frame));
+        log_outcome(h.stamp.seq, &out);
         let mut stamp = Stamp::derived(MessageKind::Pose, &h.stamp);
         stamp.stage_start_ns = start;
         let pose = PoseHeader {
@@ -174,6 +171,30 @@ impl TrackerStage {
         self.keyframes
             .send(header, |hd, buf| hd.encode(&parts, buf))?;
         Ok(())
+    }
+}
+
+/// Logs what went wrong with a frame, and model changes.
+fn log_outcome(seq: u64, out: &TrackOutcome) {
+    for update in &out.model_updates {
+        match update {
+            ModelUpdate::Installed {
+                points,
+                map_seq,
+                keyframes,
+            } => tracing::info!(
+                "frame #{seq}: tracking against {points} points (map as of keyframe {}, {keyframes} newer keyframes)",
+                map_seq.map_or_else(|| "none".to_string(), |s| format!("#{s}"))
+            ),
+            ModelUpdate::Refused(why) => tracing::warn!("{why}; keeping the current model"),
+        }
+    }
+    match (&out.failure, out.status) {
+        (Some(why), _) => tracing::warn!("frame #{seq}: {:?} ({why})", out.status),
+        (None, TrackStatus::Relocalised) => {
+            tracing::warn!("frame #{seq}: relocalised (fitness {:.2})", out.fitness)
+        }
+        _ => {}
     }
 }
 

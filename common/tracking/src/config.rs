@@ -1,4 +1,6 @@
-use opengs_gicp::{RegistrationConfig, Regularization, DEFAULT_NEIGHBOURS};
+use opengs_gicp::{CoarseToFine, RegistrationConfig, Regularization, DEFAULT_NEIGHBOURS};
+
+use crate::{RelocaliseConfig, VerifyConfig};
 
 /// Tracker settings; defaults are METHOD §7's TUM-size values.
 #[derive(Debug, Clone, PartialEq)]
@@ -8,14 +10,20 @@ pub struct TrackerConfig {
     /// Neighbours per covariance (10).
     pub neighbours: usize,
     pub regularization: Regularization,
+    /// The fine registration (METHOD §7) …
     pub registration: RegistrationConfig,
+    /// … and the wide stages run before it.
+    pub coarse_to_fine: CoarseToFine,
+    /// What a registration must satisfy to be trusted.
+    pub verify: VerifyConfig,
+    pub relocalise: RelocaliseConfig,
     /// A frame whose overlap with the target drops below this is a tracking keyframe (0.81 TUM, 0.7 Replica).
     pub keyframe_overlap: f64,
     /// A mapping keyframe at least every this many frames (10).
     pub keyframe_every: u64,
     /// Depth beyond this (m) is ignored.
     pub max_depth: f64,
-    /// Fewer valid samples than this is a tracking failure.
+    /// Fewer valid samples than this and the frame is lost.
     pub min_points: usize,
 }
 
@@ -32,6 +40,9 @@ impl TrackerConfig {
             neighbours: DEFAULT_NEIGHBOURS,
             regularization: Regularization::NormalizedEllipse,
             registration: RegistrationConfig::tum(),
+            coarse_to_fine: CoarseToFine::default(),
+            verify: VerifyConfig::default(),
+            relocalise: RelocaliseConfig::default(),
             keyframe_overlap: 0.81,
             keyframe_every: 10,
             max_depth: 5.0,

@@ -1,13 +1,22 @@
-//! Frame-to-model tracking after GS-ICP SLAM (METHOD §7): G-ICP of each
-//! frame's depth samples against a target model, a constant-velocity guess
-//! when registration fails, and the keyframe rule.
+//! Frame-to-model tracking after GS-ICP SLAM (METHOD §7), made to hold on
+//! motion it was not tuned on: coarse-to-fine G-ICP of each frame's depth
+//! samples from a constant-velocity prediction, every result verified, lost
+//! frames reported as lost (no keyframe, no Gaussians), relocalisation from
+//! several guesses until a result verifies again, the keyframe rule, and a
+//! model built off the tracking path.
 
 mod config;
 mod frame_tracker;
+mod model;
 mod motion;
+mod relocalise;
+mod verify;
 
 pub use config::TrackerConfig;
 pub use frame_tracker::{
-    FrameTracker, KeyframeKind, TrackOutcome, TrackStatus, WorldKeyframeCloud,
+    DepthFrame, FrameTracker, KeyframeKind, TrackOutcome, TrackStatus, WorldKeyframeCloud,
 };
+pub use model::{ModelBuilder, ModelUpdate, TrackingModel};
 pub use motion::ConstantVelocity;
+pub use relocalise::{RelocaliseConfig, Relocaliser};
+pub use verify::{verify, MotionPrior, Rejection, VerifyConfig};

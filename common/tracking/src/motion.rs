@@ -1,86 +1,126 @@
+use opengs_geometry::nalgebra::{Matrix3, Translation3, UnitQuaternion, Vector3};
 use opengs_geometry::Pose;
 
-/// Frames a failed tracker keeps extrapolating before it assumes the camera stopped.
-const MAX_COAST_FRAMES: u32 = 3;
+/// Gaps longer than this (s) are not extrapolated: the camera may have done anything.
+const MAX_EXTRAPOLATION_S: f64 = 0.5;
 
-/// Constant-velocity motion model: the next pose repeats the last tracked relative motion.
+/// Constant-velocity motion model over time: the next pose repeats the last
+/// verified relative motion, scaled to the time since (so a frame after five
+/// dropped ones is predicted six steps ahead, not one).
 #[derive(Debug, Clone, Default)]
 pub struct ConstantVelocity {
-    last: Option<Pose>,
-    /// Relative motion of the last tracked step, `T_{k−2}⁻¹ · T_{k−1}`.
-    velocity: Option<Pose>,
-    coasted: u32,
+    /// Last verified pose and its time (s).
+    last: Option<(Pose, f64)>,
+    /// Relative motion of the last verified step `T_{k−1}⁻¹ · T_k`, and its duration (s).
+    step: Option<(Pose, f64)>,
 }
 
 impl ConstantVelocity {
-    /// A tracked pose.
-    pub fn update(&mut self, pose: Pose) {
-        self.velocity = self.last.map(|l| l.inverse() * pose);
-        self.last = Some(pose);
-        self.coasted = 0;
+    /// A verified pose at time `t` (s).
+    pub fn update(&mut self, pose: Pose, t: f64) {
+        self.step = self.last.and_then(|(last, t_last)| {
+            let dt = t - t_last;
+            (dt > 0.0 && dt <= MAX_EXTRAPOLATION_S).then(|| (last.inverse() * pose, dt))
+        });
+        self.last = Some((pose, t));
     }
 
-    /// A guessed pose (tracking failed): keep the velocity, for a few frames only.
-    pub fn coast(&mut self, pose: Pose) {
-        self.last = Some(pose);
-        self.coasted += 1;
-        if self.coasted >= MAX_COAST_FRAMES {
-            self.velocity = None;
-        }
+    /// Forgets the velocity (after tracking was lost: the old motion says nothing).
+    pub fn stop(&mut self) {
+        self.step = None;
     }
 
-    pub fn last(&self) -> Option<Pose> {
+    /// The last verified pose and its time.
+    pub fn last(&self) -> Option<(Pose, f64)> {
         self.last
     }
 
-    /// `T_k ≈ T_{k−1} · v`, or the last pose when no velocity is known.
-    pub fn predict(&self) -> Option<Pose> {
-        let last = self.last?;
-        Some(match self.velocity {
-            Some(v) => last * v,
-            None => last,
-        })
+    /// `T(t) = T_last · step^((t − t_last) / dt)` (the step's screw motion, scaled); the
+    /// last pose when no velocity is known or `t` lies beyond the extrapolation horizon.
+    pub fn predict(&self, t: f64) -> Option<Pose> {
+        let (last, t_last) = self.last?;
+        let ahead = t - t_last;
+        let Some((step, dt)) = self.step else {
+            return Some(last);
+        };
+        if !(ahead > 0.0 && ahead <= MAX_EXTRAPOLATION_S) {
+            return Some(last);
+        }
+        Some(last * power(&step, ahead / dt))
     }
+}
+
+/// `V(ω) = I + (1 − cos θ)/θ² [ω]× + (θ − sin θ)/θ³ [ω]×²`, which maps a twist's
+/// translation part to the translation of its exponential.
+fn left_jacobian(omega: &Vector3<f64>) -> Matrix3<f64> {
+    let theta = omega.norm();
+    let k = omega.cross_matrix();
+    if theta < 1e-9 {
+        return Matrix3::identity() + k * 0.5;
+    }
+    let (s, c) = theta.sin_cos();
+    Matrix3::identity() + k * ((1.0 - c) / (theta * theta)) + k * k * ((theta - s) / theta.powi(3))
+}
+
+/// `T^s = exp(s · log T)` on SE(3).
+fn power(t: &Pose, s: f64) -> Pose {
+    let omega = t.rotation.scaled_axis();
+    let v = left_jacobian(&omega)
+        .try_inverse()
+        .map_or(t.translation.vector, |inv| inv * t.translation.vector);
+    let scaled = omega * s;
+    Pose::from_parts(
+        Translation3::from(left_jacobian(&scaled) * (v * s)),
+        UnitQuaternion::from_scaled_axis(scaled),
+    )
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use opengs_geometry::nalgebra::{Translation3, UnitQuaternion, Vector3};
 
     fn step() -> Pose {
         Pose::from_parts(
-            Translation3::new(0.1, 0.0, 0.0),
-            UnitQuaternion::from_axis_angle(&Vector3::z_axis(), 0.1),
+            Translation3::new(0.01, 0.0, 0.0),
+            UnitQuaternion::from_axis_angle(&Vector3::z_axis(), 0.01),
         )
     }
 
-    fn close(a: &Pose, b: &Pose) -> bool {
-        (a.translation.vector - b.translation.vector).norm() < 1e-12
+    fn close_within(a: &Pose, b: &Pose, metres: f64) -> bool {
+        (a.translation.vector - b.translation.vector).norm() < metres
             && a.rotation.angle_to(&b.rotation) < 1e-12
     }
 
-    #[test]
-    fn repeats_the_last_motion() {
-        let mut m = ConstantVelocity::default();
-        assert!(m.predict().is_none());
-        m.update(Pose::identity());
-        assert_eq!(m.predict(), Some(Pose::identity()));
-        m.update(step());
-        assert!(close(&m.predict().expect("known"), &(step() * step())));
+    fn close(a: &Pose, b: &Pose) -> bool {
+        close_within(a, b, 1e-12)
     }
 
     #[test]
-    fn coasting_stops_after_a_few_failures() {
+    fn repeats_the_last_motion_scaled_to_the_time_since() {
         let mut m = ConstantVelocity::default();
-        m.update(Pose::identity());
-        m.update(step());
-        let mut pose = step();
-        for _ in 0..MAX_COAST_FRAMES {
-            pose = m.predict().expect("known");
-            m.coast(pose);
-        }
-        // Velocity dropped: the guess now holds still instead of running away.
-        assert!(close(&m.predict().expect("known"), &pose));
+        assert!(m.predict(0.0).is_none());
+        m.update(Pose::identity(), 0.0);
+        assert_eq!(m.predict(0.1), Some(Pose::identity()));
+        m.update(step(), 0.1);
+        // One step ahead: step². Three steps ahead (two frames dropped): step⁴.
+        assert!(close(&m.predict(0.2).expect("known"), &(step() * step())));
+        let four = step() * step() * step() * step();
+        assert!(close_within(&m.predict(0.4).expect("known"), &four, 1e-12));
+        // Half a step, twice, is one step.
+        let half = power(&step(), 0.5);
+        assert!(close(&(half * half), &step()));
+    }
+
+    #[test]
+    fn long_gaps_and_stops_hold_the_last_pose() {
+        let mut m = ConstantVelocity::default();
+        m.update(Pose::identity(), 0.0);
+        m.update(step(), 0.1);
+        assert!(close(&m.predict(5.0).expect("known"), &step()));
+        m.stop();
+        assert!(close(&m.predict(0.2).expect("known"), &step()));
+        // A verified pose after a long gap gives no velocity either.
+        m.update(step() * step(), 3.0);
+        assert!(close(&m.predict(3.1).expect("known"), &(step() * step())));
     }
 }

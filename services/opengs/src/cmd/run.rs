@@ -159,7 +159,7 @@ fn print_summary(s: &RunSummary) {
     // Tracking rate while the data streamed (the mapper's final work and scoring excluded).
     let fps = s.poses as f64 / s.streaming_s.max(1e-9);
     println!(
-        "\n{} in {:.1} s ({:.1} s of data): {} frames published, {} poses ({:.1} fps), {} keyframes, {} tracking failures",
+        "\n{} in {:.1} s ({:.1} s of data): {} frames published, {} poses ({:.1} fps), {} keyframes, {} lost frames",
         if s.interrupted { "interrupted" } else { "finished" },
         s.elapsed_s,
         s.streaming_s,
@@ -167,8 +167,22 @@ fn print_summary(s: &RunSummary) {
         s.poses,
         fps,
         s.keyframes,
-        s.tracking_failures
+        s.lost_frames
     );
+    if s.lost_frames > 0 {
+        println!(
+            "tracking was lost on {} frames ({} relocalisations); they are in lost.txt, not in \
+             trajectory.txt",
+            s.lost_frames, s.relocalisations
+        );
+    }
+    let skipped = s.frames_published.saturating_sub(s.poses as u64);
+    if skipped > 0 {
+        println!(
+            "{skipped} published frames got no pose: the tracker fell behind and the oldest \
+             frames were dropped from its queue"
+        );
+    }
     let restarts: Vec<String> = s
         .restarts
         .iter()

@@ -1,0 +1,219 @@
+//! Coarse-to-fine registration. The fine search (3 cm correspondences) only
+//! converges from within a few centimetres of the answer; a camera that drops
+//! frames jumps 10 cm and 5° between two frames. So the source is first
+//! registered with wide correspondences against a coarse voxel grid of the
+//! target, then with narrower ones, and last at the fine settings:
+//!
+//! ```text
+//! stage   source          target           max correspondence
+//! 1       8 cm voxels     5 cm voxels      30 cm
+//! 2       4 cm voxels     5 cm voxels      10 cm
+//! 3       every point     every point      RegistrationConfig (3 cm TUM)
+//! ```
+//!
+//! Measured on the synthetic room (`examples/jump_probe` of the tracking
+//! crate, 72 jumps of 2–40 cm and 1–7° from 4 viewpoints): the fine search
+//! alone found 38, these three stages 69; the three misses converge 70 cm
+//! away with a fitness of 0.36 and are caught by the tracker's verification.
+
+use nalgebra::Isometry3;
+
+use crate::{register, Cloud, GicpError, Registration, RegistrationConfig, Target};
+
+/// One stage of the schedule.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Stage {
+    pub max_correspondence_distance: f64,
+    /// The source is thinned to one point per voxel of this side (m); 0 keeps every point.
+    pub source_voxel: f64,
+    /// Register against the coarse target (else the full one).
+    pub coarse_target: bool,
+    pub max_iterations: usize,
+    /// The stage stops once its update is below the fine epsilons × this.
+    pub epsilon_scale: f64,
+}
+
+/// The schedule: coarse stages, then the fine registration.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CoarseToFine {
+    /// Voxel side (m) of the coarse target.
+    pub coarse_voxel: f64,
+    /// Stages run before the fine registration, widest first.
+    pub stages: Vec<Stage>,
+}
+
+impl Default for CoarseToFine {
+    fn default() -> Self {
+        let stage = |distance: f64, source_voxel: f64| Stage {
+            max_correspondence_distance: distance,
+            source_voxel,
+            coarse_target: true,
+            max_iterations: 20,
+            epsilon_scale: 4.0,
+        };
+        Self {
+            coarse_voxel: 0.05,
+            stages: vec![stage(0.3, 0.08), stage(0.1, 0.04)],
+        }
+    }
+}
+
+impl CoarseToFine {
+    /// Only the fine registration (METHOD §7 as written).
+    pub fn fine_only() -> Self {
+        Self {
+            coarse_voxel: 0.0,
+            stages: Vec::new(),
+        }
+    }
+}
+
+/// A target at two resolutions, every search structure built up front so that
+/// registering against it never builds anything (build it off the tracking path).
+pub struct CoarseToFineTarget {
+    fine: Target,
+    coarse: Target,
+}
+
+impl CoarseToFineTarget {
+    /// Builds both levels; `coarse_voxel ≤ 0` makes the coarse level the full cloud.
+    pub fn new(cloud: Cloud, coarse_voxel: f64) -> Self {
+        let coarse = Target::new(cloud.voxel_subsample(coarse_voxel));
+        let fine = Target::new(cloud);
+        // Wide stages search beyond the grid's radius: the kd-trees are built now.
+        let _ = coarse.tree();
+        let _ = fine.tree();
+        Self { fine, coarse }
+    }
+
+    pub fn fine(&self) -> &Target {
+        &self.fine
+    }
+
+    pub fn coarse(&self) -> &Target {
+        &self.coarse
+    }
+
+    pub fn len(&self) -> usize {
+        self.fine.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.fine.is_empty()
+    }
+}
+
+/// Registers `source` to `target` from `initial` through the stages of
+/// `schedule`, then at `fine`. A coarse stage that fails (too few
+/// correspondences, degenerate) leaves the estimate where it was; the fine
+/// stage's result, statistics included, is the answer.
+pub fn register_coarse_to_fine(
+    source: &Cloud,
+    target: &CoarseToFineTarget,
+    initial: &Isometry3<f64>,
+    fine: &RegistrationConfig,
+    schedule: &CoarseToFine,
+) -> Result<Registration, GicpError> {
+    let mut estimate = *initial;
+    for stage in &schedule.stages {
+        let config = RegistrationConfig {
+            max_correspondence_distance: stage.max_correspondence_distance,
+            max_iterations: stage.max_iterations,
+            rotation_epsilon: fine.rotation_epsilon * stage.epsilon_scale,
+            translation_epsilon: fine.translation_epsilon * stage.epsilon_scale,
+            ..fine.clone()
+        };
+        let thinned;
+        let stage_source = if stage.source_voxel > 0.0 {
+            thinned = source.voxel_subsample(stage.source_voxel);
+            &thinned
+        } else {
+            source
+        };
+        let stage_target = if stage.coarse_target {
+            target.coarse()
+        } else {
+            target.fine()
+        };
+        if let Ok(r) = register(stage_source, stage_target, &estimate, &config) {
+            estimate = r.transform;
+        }
+    }
+    register(source, target.fine(), &estimate, fine)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::bench::{small_motion, view};
+    use crate::synthetic::RoomScene;
+    use crate::{Regularization, DEFAULT_NEIGHBOURS};
+
+    /// A view of the synthetic room `cm` / `deg` away from the target's view.
+    fn jump(cm: f64, deg: f64) -> (Cloud, CoarseToFineTarget, Isometry3<f64>) {
+        let scene = RoomScene::default();
+        let mut target_points = Vec::new();
+        for pose in [Isometry3::identity(), small_motion(-10.0, -4.0)] {
+            let samples = view(&scene, &pose, 4).expect("view");
+            target_points.extend(samples.points.into_iter().map(|p| pose * p));
+        }
+        let target_cloud =
+            Cloud::with_covariances(target_points, DEFAULT_NEIGHBOURS, Regularization::default())
+                .expect("target");
+        let truth = small_motion(cm, deg);
+        let samples = view(&scene, &truth, 5).expect("view");
+        let source =
+            Cloud::from_depth_samples(&samples, DEFAULT_NEIGHBOURS, Regularization::default())
+                .expect("source");
+        (
+            source,
+            CoarseToFineTarget::new(target_cloud, CoarseToFine::default().coarse_voxel),
+            truth,
+        )
+    }
+
+    fn error_cm_deg(r: &Registration, truth: &Isometry3<f64>) -> (f64, f64) {
+        let e = truth.inverse() * r.transform;
+        (
+            e.translation.vector.norm() * 100.0,
+            e.rotation.angle().to_degrees(),
+        )
+    }
+
+    #[test]
+    fn a_ten_centimetre_five_degree_jump_is_recovered() {
+        let (source, target, truth) = jump(10.0, 5.0);
+        let fine = RegistrationConfig::tum();
+        let r = register_coarse_to_fine(
+            &source,
+            &target,
+            &Isometry3::identity(),
+            &fine,
+            &CoarseToFine::default(),
+        )
+        .expect("registers");
+        let (cm, deg) = error_cm_deg(&r, &truth);
+        assert!(cm < 0.5 && deg < 0.2, "{cm:.2} cm {deg:.2}°");
+        assert!(r.fitness > 0.8, "fitness {}", r.fitness);
+        // The fine search alone, from the same start, does not get there.
+        let alone = register(&source, target.fine(), &Isometry3::identity(), &fine);
+        let alone_cm = alone.map_or(f64::INFINITY, |r| error_cm_deg(&r, &truth).0);
+        assert!(alone_cm > 2.0, "fine-only error {alone_cm:.2} cm");
+    }
+
+    #[test]
+    fn fine_only_schedule_is_plain_registration() {
+        let (source, target, _) = jump(1.0, 0.5);
+        let fine = RegistrationConfig::tum();
+        let a = register_coarse_to_fine(
+            &source,
+            &target,
+            &Isometry3::identity(),
+            &fine,
+            &CoarseToFine::fine_only(),
+        )
+        .expect("registers");
+        let b = register(&source, target.fine(), &Isometry3::identity(), &fine).expect("ok");
+        assert_eq!(a, b);
+    }
+}

@@ -1,0 +1,141 @@
+//! Where to look while lost. Registration from the last verified pose failed;
+//! the camera is somewhere near it, or back near a place it has mapped. The
+//! relocaliser hands out starting guesses, a few per frame so a lost frame
+//! costs about what a tracked one does: the last verified pose, that pose
+//! panned, tilted and moved along each camera axis (one ring, then one twice
+//! as wide), and the poses of the keyframes nearest to it. Each guess goes
+//! through the full coarse-to-fine registration and the verification, with a
+//! stricter fitness since no motion prior vouches for the answer.
+
+use opengs_geometry::nalgebra::{Translation3, UnitQuaternion, Vector3};
+use opengs_geometry::Pose;
+
+use crate::VerifyConfig;
+
+/// Relocalisation settings.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RelocaliseConfig {
+    /// Guesses tried per lost frame.
+    pub guesses_per_frame: usize,
+    /// Translation (m) and rotation (rad) of the inner ring of guesses.
+    pub step: f64,
+    pub turn: f64,
+    /// Keyframe poses (nearest to the last verified pose) added as guesses.
+    pub keyframe_guesses: usize,
+    /// The verification a relocalised pose must pass (no motion prior).
+    pub verify: VerifyConfig,
+}
+
+impl Default for RelocaliseConfig {
+    fn default() -> Self {
+        Self {
+            guesses_per_frame: 2,
+            step: 0.15,
+            turn: 12f64.to_radians(),
+            keyframe_guesses: 4,
+            verify: VerifyConfig {
+                min_fitness: 0.6,
+                ..VerifyConfig::default()
+            },
+        }
+    }
+}
+
+/// Hands out the guesses of one lost spell, cycling through them.
+#[derive(Debug, Clone, Default)]
+pub struct Relocaliser {
+    guesses: Vec<Pose>,
+    next: usize,
+}
+
+impl Relocaliser {
+    /// A new lost spell: guesses around `anchor` (the last verified pose), and the
+    /// keyframe poses nearest to it.
+    pub fn start(anchor: &Pose, keyframe_poses: &[Pose], config: &RelocaliseConfig) -> Self {
+        let mut guesses = vec![*anchor];
+        for scale in [1.0, 2.0] {
+            let (step, turn) = (config.step * scale, config.turn * scale);
+            // Camera axes: x right, y down (pan about it), z forward.
+            for (axis, angle) in [(Vector3::y(), turn), (Vector3::x(), turn)] {
+                for sign in [1.0, -1.0] {
+                    let r = UnitQuaternion::from_scaled_axis(axis * angle * sign);
+                    guesses.push(anchor * Pose::from_parts(Translation3::identity(), r));
+                }
+            }
+            for axis in [Vector3::x(), Vector3::z(), Vector3::y()] {
+                for sign in [1.0, -1.0] {
+                    let t = Translation3::from(axis * step * sign);
+                    guesses.push(anchor * Pose::from_parts(t, UnitQuaternion::identity()));
+                }
+            }
+        }
+        let mut nearest: Vec<(f64, Pose)> = keyframe_poses
+            .iter()
+            .map(|k| {
+                let d = anchor.inverse() * k;
+                // Metres plus radians: a 10° turn weighs like 17 cm.
+                (d.translation.vector.norm() + d.rotation.angle(), *k)
+            })
+            .filter(|(distance, _)| *distance > 1e-6)
+            .collect();
+        nearest.sort_by(|a, b| a.0.total_cmp(&b.0));
+        guesses.extend(
+            nearest
+                .into_iter()
+                .take(config.keyframe_guesses)
+                .map(|(_, p)| p),
+        );
+        Self { guesses, next: 0 }
+    }
+
+    /// The next `n` guesses (cycling), empty when there are none.
+    pub fn next_guesses(&mut self, n: usize) -> Vec<Pose> {
+        if self.guesses.is_empty() {
+            return Vec::new();
+        }
+        (0..n.min(self.guesses.len()))
+            .map(|_| {
+                let g = self.guesses[self.next % self.guesses.len()];
+                self.next += 1;
+                g
+            })
+            .collect()
+    }
+
+    pub fn len(&self) -> usize {
+        self.guesses.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.guesses.is_empty()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn guesses_ring_the_anchor_then_visit_keyframes_and_cycle() {
+        let anchor = Pose::translation(1.0, 2.0, 3.0);
+        let keyframes = [
+            Pose::translation(1.0, 2.0, 3.0), // the anchor itself: not repeated
+            Pose::translation(5.0, 2.0, 3.0),
+            Pose::translation(1.5, 2.0, 3.0),
+        ];
+        let c = RelocaliseConfig::default();
+        let mut r = Relocaliser::start(&anchor, &keyframes, &c);
+        // 1 anchor + 2 rings × (4 turns + 6 moves) + 2 keyframes.
+        assert_eq!(r.len(), 1 + 2 * 10 + 2);
+        let first = r.next_guesses(2);
+        assert_eq!(first[0], anchor);
+        let pan = anchor.inverse() * first[1];
+        assert!((pan.rotation.angle() - c.turn).abs() < 1e-12);
+        let rest = r.next_guesses(100);
+        assert_eq!(rest.len(), r.len());
+        // The nearest keyframe comes before the far one, and the cycle goes on.
+        assert_eq!(rest[19], keyframes[2]);
+        assert_eq!(rest[20], keyframes[1]);
+        assert_eq!(rest[21], anchor);
+    }
+}
