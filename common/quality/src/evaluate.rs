@@ -7,7 +7,7 @@ use opengs_geometry::{Intrinsics, Pose};
 use opengs_splat::{render_into, Camera, GaussianMap, RenderRequest, Rendered};
 
 use crate::frame_images::{check_frame, valid_depth_mask};
-use crate::report::{FrameQuality, QualityReport};
+use crate::report::{FrameQuality, QualityReport, HOLE_SILHOUETTE};
 use crate::side_by_side::write_side_by_side_png;
 use crate::{psnr_masked, ssim_masked, QualityError};
 
@@ -71,12 +71,18 @@ impl<'a> QualityEvaluator<'a> {
             &mut self.rendered,
         );
         let out = &self.rendered.output;
+        let open = valid
+            .iter()
+            .zip(&out.silhouette)
+            .filter(|(&v, &alpha)| v && alpha < HOLE_SILHOUETTE)
+            .count();
         let q = FrameQuality {
             index: frame.index,
             timestamp: frame.timestamp,
             psnr_db: psnr_masked(&out.color, &frame.rgb, &valid),
             ssim: ssim_masked(&out.color, &frame.rgb, &valid, frame.width, frame.height),
             valid_fraction: n_valid as f64 / valid.len() as f64,
+            holes: open as f64 / n_valid as f64,
         };
         self.per_frame.push(q);
         if let (true, Some(dir)) = (save_png, &self.out_dir) {
@@ -99,8 +105,13 @@ impl<'a> QualityEvaluator<'a> {
         }
         let mean =
             |f: fn(&FrameQuality) -> f64| self.per_frame.iter().map(f).sum::<f64>() / n as f64;
+        // Weighted by each frame's valid pixels: the share of all scored pixels left open.
+        let (open, valid) = self.per_frame.iter().fold((0.0, 0.0), |(o, v), q| {
+            (o + q.holes * q.valid_fraction, v + q.valid_fraction)
+        });
         Ok(QualityReport {
             frames_evaluated: n,
+            holes_pct: 100.0 * open / valid,
             psnr_db: mean(|q| q.psnr_db),
             ssim: mean(|q| q.ssim),
             frames_without_depth: self.frames_without_depth,

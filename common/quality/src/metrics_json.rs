@@ -36,7 +36,7 @@ pub fn merge_metrics_json(path: &Path, entries: Map<String, Value>) -> Result<()
     })
 }
 
-/// Adds `psnr_db{suffix}`, `ssim{suffix}` and `quality_frames{suffix}` to
+/// Adds `psnr_db{suffix}`, `ssim{suffix}`, `holes_pct{suffix}` and `quality_frames{suffix}` to
 /// `run_dir/metrics.json` (suffix "" after a run, "_refined" after `opengs refine`).
 pub fn write_quality_metrics(
     run_dir: &Path,
@@ -46,6 +46,7 @@ pub fn write_quality_metrics(
     let mut entries = Map::new();
     entries.insert(format!("psnr_db{suffix}"), Value::from(report.psnr_db));
     entries.insert(format!("ssim{suffix}"), Value::from(report.ssim));
+    entries.insert(format!("holes_pct{suffix}"), Value::from(report.holes_pct));
     entries.insert(
         format!("quality_frames{suffix}"),
         Value::from(report.frames_evaluated),
@@ -82,6 +83,7 @@ mod tests {
             frames_evaluated: 3,
             psnr_db,
             ssim: 0.9,
+            holes_pct: 0.25,
             frames_without_depth: 0,
             per_frame: Vec::new(),
             pngs: Vec::new(),
@@ -105,6 +107,7 @@ mod tests {
         assert_eq!(v["ate_rmse_cm"], 1.5);
         assert_eq!(v["psnr_db"], 30.5);
         assert_eq!(v["psnr_db_refined"], 31.0);
+        assert_eq!(v["holes_pct"], 0.25);
         assert_eq!(v["quality_frames_refined"], 3);
 
         let fresh = scratch_dir("fresh");

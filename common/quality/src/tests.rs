@@ -90,6 +90,44 @@ fn backprojected_map_renders_its_frame_well() {
 }
 
 #[test]
+fn pixels_the_map_leaves_open_are_counted_as_holes() {
+    let mut room = small_room();
+    let k = room.intrinsics();
+    let frames = posed(&mut room, &[0]);
+    let (frame, pose) = &frames[0];
+    let full = backproject(frame, pose, &k);
+    let closed = evaluate_render_quality(&full, frames.clone(), k, 1, None).expect("evaluates");
+    assert!(closed.holes_pct < 1.0, "{}", closed.holes_pct);
+    // Drop the Gaussians of the left half of the image (columns u < 40 of 80): about half
+    // the valid pixels open (a pixel-wide splat also covers its neighbour column).
+    let mut half = GaussianMap::new();
+    let mut i = 0;
+    for v in 0..frame.height {
+        for u in 0..frame.width {
+            if frame.depth_m(u, v).is_none() {
+                continue;
+            }
+            if u >= 40 {
+                half.push(full.get(i));
+            }
+            i += 1;
+        }
+    }
+    let valid_left = (0..frame.height)
+        .flat_map(|v| (0..40).map(move |u| (u, v)))
+        .filter(|&(u, v)| frame.depth_m(u, v).is_some())
+        .count();
+    let valid = frame.depth.iter().filter(|&&d| d != 0).count();
+    let expected = 100.0 * valid_left as f64 / valid as f64;
+    let r = evaluate_render_quality(&half, frames, k, 1, None).expect("evaluates");
+    assert!(
+        (r.holes_pct - expected).abs() < 2.5,
+        "holes {:.2} % vs left half {expected:.2} %",
+        r.holes_pct
+    );
+}
+
+#[test]
 fn dataset_evaluation_matches_trajectory_and_writes_pngs() {
     let mut room = small_room();
     let k = room.intrinsics();

@@ -202,8 +202,8 @@ fn print_summary(s: &RunSummary) {
     }
     if let Some(q) = &s.quality {
         println!(
-            "render quality: PSNR {:.2} dB, SSIM {:.3} over {} frames (valid depth only)",
-            q.psnr_db, q.ssim, q.frames_evaluated
+            "render quality: PSNR {:.2} dB, SSIM {:.3}, holes {:.2} % over {} frames (valid depth only)",
+            q.psnr_db, q.ssim, q.holes_pct, q.frames_evaluated
         );
     }
     if let Some(sem) = &s.semantics {
