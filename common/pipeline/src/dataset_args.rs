@@ -5,7 +5,7 @@ use std::path::PathBuf;
 use opengs_datasets::{DatasetKind, DatasetSpec, DepthNoise};
 
 /// Which dataset to stream and how.
-#[derive(clap::Args, Debug, Clone, Default, serde::Serialize, serde::Deserialize)]
+#[derive(clap::Args, Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct DatasetArgs {
     /// `synthetic` (the embedded room), `tum:DIR` or `replica:DIR`.
     #[arg(long, default_value = "synthetic")]
@@ -22,18 +22,99 @@ pub struct DatasetArgs {
     /// Synthetic only: add Kinect-like depth noise and missing depth.
     #[arg(long)]
     pub noise: bool,
+    /// Synthetic only: room of the scene suite. 0 is the fixed 5×4 m room;
+    /// any other seed generates a furnished room around the camera path.
+    #[arg(long, value_name = "SEED", default_value_t = 0)]
+    #[serde(default)]
+    pub scene: u64,
+    /// Synthetic only: drop this fraction of frames at random (0 ≤ RATE < 1);
+    /// dropped frames leave a jump in the timestamps.
+    #[arg(long = "drop-frames", value_name = "RATE", default_value_t = 0.0,
+          value_parser = parse_drop_rate, allow_hyphen_values = true)]
+    #[serde(default)]
+    pub drop_frames: f64,
+    /// Synthetic only: random drops come in bursts of N consecutive frames (N ≥ 1).
+    #[arg(long, value_name = "N", default_value_t = 1, value_parser = parse_at_least_one)]
+    #[serde(default = "one")]
+    pub drop_burst: usize,
+    /// Synthetic only: keep every K-th frame of the 30 Hz clock, so the
+    /// camera moves K times faster per frame (K ≥ 1).
+    #[arg(long, value_name = "K", default_value_t = 1, value_parser = parse_at_least_one)]
+    #[serde(default = "one")]
+    pub speed: usize,
+    /// Synthetic only: skip the first SECONDS of the camera path (the room
+    /// is the same as for the whole path).
+    #[arg(long, value_name = "SECONDS", default_value_t = 0.0,
+          value_parser = parse_start, allow_hyphen_values = true)]
+    #[serde(default)]
+    pub start: f64,
+}
+
+fn one() -> usize {
+    1
+}
+
+/// `--drop-frames`: a fraction in [0, 1).
+pub fn parse_drop_rate(s: &str) -> Result<f64, String> {
+    match s.trim().parse::<f64>() {
+        Ok(r) if r.is_finite() && (0.0..1.0).contains(&r) => Ok(r),
+        _ => Err(format!(
+            "'{s}' is not a drop rate: give a fraction in [0, 1), e.g. 0.1"
+        )),
+    }
+}
+
+/// `--drop-burst`, `--speed`: a whole number ≥ 1.
+pub fn parse_at_least_one(s: &str) -> Result<usize, String> {
+    match s.trim().parse::<usize>() {
+        Ok(n) if n >= 1 => Ok(n),
+        _ => Err(format!("'{s}' is not a whole number of at least 1")),
+    }
+}
+
+/// `--start`: seconds ≥ 0.
+pub fn parse_start(s: &str) -> Result<f64, String> {
+    match s.trim().parse::<f64>() {
+        Ok(t) if t.is_finite() && t >= 0.0 => Ok(t),
+        _ => Err(format!("'{s}' is not a start time: give 0 or more seconds")),
+    }
+}
+
+impl Default for DatasetArgs {
+    fn default() -> Self {
+        Self {
+            dataset: "synthetic".to_string(),
+            frames: None,
+            trajectory: None,
+            seed: 0,
+            noise: false,
+            scene: 0,
+            drop_frames: 0.0,
+            drop_burst: 1,
+            speed: 1,
+            start: 0.0,
+        }
+    }
 }
 
 impl DatasetArgs {
     pub fn spec(&self) -> anyhow::Result<DatasetSpec> {
         let kind: DatasetKind = self.dataset.parse()?;
         let mut spec = DatasetSpec::new(kind).with_max_frames(self.frames);
-        spec.synthetic.frames = self.frames;
-        spec.synthetic.seed = self.seed;
-        spec.synthetic.trajectory = self.trajectory.clone();
+        let synthetic = &mut spec.synthetic;
+        synthetic.frames = self.frames;
+        synthetic.seed = self.seed;
+        synthetic.trajectory = self.trajectory.clone();
         if self.noise {
-            spec.synthetic.noise = Some(DepthNoise::default());
+            synthetic.noise = Some(DepthNoise::default());
         }
+        synthetic.scene = self.scene;
+        synthetic.drop_rate = self.drop_frames;
+        synthetic.drop_burst = self.drop_burst;
+        synthetic.speed = self.speed;
+        synthetic.start_s = self.start;
+        // Values from run.json bypass the flag parsers: check them here too.
+        synthetic.validate()?;
         Ok(spec)
     }
 
@@ -50,6 +131,110 @@ impl DatasetArgs {
         if self.noise {
             a.push("--noise".to_string());
         }
+        a.extend(["--scene".to_string(), self.scene.to_string()]);
+        // f64 Display is the shortest text that parses back to the same value.
+        a.extend(["--drop-frames".to_string(), self.drop_frames.to_string()]);
+        a.extend(["--drop-burst".to_string(), self.drop_burst.to_string()]);
+        a.extend(["--speed".to_string(), self.speed.to_string()]);
+        a.extend(["--start".to_string(), self.start.to_string()]);
         a
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::Parser;
+
+    #[derive(Parser, Debug)]
+    struct Cli {
+        #[command(flatten)]
+        dataset: DatasetArgs,
+    }
+
+    fn parse(args: &[&str]) -> Result<DatasetArgs, String> {
+        Cli::try_parse_from(std::iter::once("opengs").chain(args.iter().copied()))
+            .map(|c| c.dataset)
+            .map_err(|e| e.to_string())
+    }
+
+    #[test]
+    fn dataset_args_defaults_match_default() {
+        assert_eq!(parse(&[]), Ok(DatasetArgs::default()));
+        let spec = DatasetArgs::default().spec().expect("spec");
+        assert_eq!(spec.synthetic, opengs_datasets::SyntheticOptions::default());
+    }
+
+    #[test]
+    fn dataset_args_round_trip_through_to_args() {
+        let args = parse(&[
+            "--trajectory",
+            "fr2_desk.txt",
+            "--frames",
+            "40",
+            "--scene",
+            "7",
+            "--drop-frames",
+            "0.125",
+            "--drop-burst",
+            "3",
+            "--speed",
+            "2",
+            "--start",
+            "31.5",
+            "--noise",
+        ])
+        .expect("valid arguments");
+        assert_eq!(
+            (
+                args.scene,
+                args.drop_frames,
+                args.drop_burst,
+                args.speed,
+                args.start
+            ),
+            (7, 0.125, 3, 2, 31.5)
+        );
+        let again: Vec<String> = args.to_args();
+        let again: Vec<&str> = again.iter().map(String::as_str).collect();
+        assert_eq!(parse(&again), Ok(args.clone()));
+        let s = args.spec().expect("spec").synthetic;
+        assert_eq!(
+            (s.scene, s.drop_rate, s.drop_burst, s.speed, s.start_s),
+            (7, 0.125, 3, 2, 31.5)
+        );
+        // Older run.json files without the new fields still load.
+        let json = r#"{"dataset": "synthetic", "frames": null, "trajectory": null, "seed": 3, "noise": false}"#;
+        let old: DatasetArgs = serde_json::from_str(json).expect("old run.json");
+        assert_eq!(old.seed, 3);
+        assert_eq!((old.scene, old.drop_burst, old.speed), (0, 1, 1));
+        let json = serde_json::to_string(&args).expect("json");
+        assert_eq!(serde_json::from_str::<DatasetArgs>(&json).ok(), Some(args));
+    }
+
+    #[test]
+    fn dataset_args_refuse_bad_values_naming_the_flag() {
+        for (flag, value) in [
+            ("--drop-frames", "1"),
+            ("--drop-frames", "-0.1"),
+            ("--drop-frames", "lots"),
+            ("--drop-burst", "0"),
+            ("--speed", "0"),
+            ("--start", "-2"),
+            ("--start", "NaN"),
+        ] {
+            let e = parse(&[flag, value]).expect_err("refused");
+            assert!(e.contains(flag), "{flag} {value}: {e}");
+        }
+        let mut args = DatasetArgs {
+            speed: 0,
+            ..DatasetArgs::default()
+        };
+        let e = args.spec().expect_err("refused").to_string();
+        assert!(e.contains("--speed"), "{e}");
+        args.speed = 1;
+        args.drop_frames = 2.0;
+        let e = args.spec().expect_err("refused").to_string();
+        assert!(e.contains("--drop-frames"), "{e}");
     }
 }

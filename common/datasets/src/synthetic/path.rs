@@ -1,5 +1,6 @@
 //! Camera paths through the synthetic room: a generated hand-held-like loop,
-//! or a real TUM trajectory re-centred into the room.
+//! or a real TUM trajectory re-centred into the room (sampled on the camera
+//! clock by [`super::timeline`]).
 
 use std::f64::consts::TAU;
 
@@ -7,8 +8,6 @@ use nalgebra::{Matrix3, Point3, Rotation3, Translation3, UnitQuaternion, UnitVec
 use opengs_geometry::Pose;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-
-use crate::trajectory::StampedPose;
 
 /// Camera-to-world pose at `eye` looking at `target` (camera x right, y down,
 /// z forward; world z up), rolled by `roll` radians about the view axis.
@@ -91,15 +90,22 @@ impl Default for LoopPath {
 impl LoopPath {
     /// Poses at `t = i / fps` for `frames` frames; deterministic for `seed`.
     pub fn poses(&self, frames: usize, fps: f64, seed: u64) -> Vec<Pose> {
+        let times: Vec<f64> = (0..frames).map(|i| i as f64 / fps).collect();
+        self.poses_at(&times, seed)
+    }
+
+    /// Poses at the given times (seconds from the loop's start); the same
+    /// path as [`LoopPath::poses`] for the same `seed`, sampled anywhere.
+    pub fn poses_at(&self, times: &[f64], seed: u64) -> Vec<Pose> {
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
         let wob: Vec<Wobble> = (0..6)
             .map(|i| Wobble::new(&mut rng, if i < 3 { self.jitter } else { 0.15 }))
             .collect();
         let roll = Wobble::new(&mut rng, self.angular_jitter);
         let start_angle = rng.gen_range(0.0..TAU);
-        (0..frames)
-            .map(|i| {
-                let t = i as f64 / fps;
+        times
+            .iter()
+            .map(|&t| {
                 let a = start_angle + TAU * t / self.period;
                 let eye = Point3::new(
                     self.centre.x + self.radius_x * a.cos() + wob[0].at(t),
@@ -151,21 +157,6 @@ pub fn fit_start_pose(poses: &[Pose], lo: &Point3<f64>, hi: &Point3<f64>) -> Pos
         Translation3::from(start.translation.vector + shift),
         start.rotation,
     )
-}
-
-/// Samples a trajectory at `fps` by timestamp (nearest pose, no interpolation).
-pub fn resample(trajectory: &[StampedPose], fps: f64) -> Vec<StampedPose> {
-    let (Some(first), Some(last)) = (trajectory.first(), trajectory.last()) else {
-        return Vec::new();
-    };
-    let times: Vec<f64> = trajectory.iter().map(|(t, _)| *t).collect();
-    let count = ((last.0 - first.0) * fps).floor() as usize + 1;
-    (0..count)
-        .filter_map(|k| {
-            let t = first.0 + k as f64 / fps;
-            crate::text::nearest_within(&times, t, f64::INFINITY).map(|i| trajectory[i])
-        })
-        .collect()
 }
 
 /// Moves a trajectory so its first pose becomes `start`, keeping every pose

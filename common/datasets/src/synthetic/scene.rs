@@ -34,7 +34,23 @@ pub struct Scene {
     pub diffuse: f32,
 }
 
+/// Classes of the room's own faces (ids 1–6); every other instance is an object.
+pub const STRUCTURAL_CLASSES: [&str; 3] = ["floor", "ceiling", "wall"];
+
 impl Scene {
+    /// Instances that are not walls, floor or ceiling.
+    pub fn object_count(&self) -> usize {
+        self.classes
+            .iter()
+            .filter(|c| !STRUCTURAL_CLASSES.contains(&c.class.as_str()))
+            .count()
+    }
+
+    /// Room size (metres along x, y, z).
+    pub fn room_size(&self) -> Vector3<f64> {
+        self.room.max - self.room.min
+    }
+
     /// Empty room with the given size and uniform walls (used by tests).
     pub fn empty_room(size: Vector3<f64>) -> Self {
         let wall = Texture::Solid([0.6, 0.6, 0.6]);
@@ -77,13 +93,14 @@ fn cuboid(centre: Point3<f64>, half: Vector3<f64>, yaw: f64) -> Shape {
 }
 
 /// Builder that hands out instance ids in order and records class names.
-struct SceneBuilder {
-    parts: Vec<Part>,
-    classes: Vec<InstanceClass>,
+#[derive(Debug, Default)]
+pub(crate) struct SceneBuilder {
+    pub(crate) parts: Vec<Part>,
+    pub(crate) classes: Vec<InstanceClass>,
 }
 
 impl SceneBuilder {
-    fn instance(&mut self, class: &str) -> u16 {
+    pub(crate) fn instance(&mut self, class: &str) -> u16 {
         let id = self.classes.len() as u16 + 1;
         self.classes.push(InstanceClass {
             id,
@@ -98,7 +115,7 @@ impl SceneBuilder {
         id
     }
 
-    fn add(&mut self, instance: u16, texture: Texture, shapes: &[Shape]) {
+    pub(crate) fn add(&mut self, instance: u16, texture: Texture, shapes: &[Shape]) {
         self.parts.extend(shapes.iter().map(|&shape| Part {
             shape,
             texture,

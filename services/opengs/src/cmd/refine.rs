@@ -223,8 +223,9 @@ fn dataset_args(run_dir: &Path, dataset_override: Option<&str>) -> anyhow::Resul
     }
 }
 
-/// `{"dataset": "...", "frames": N|null, "trajectory": "..."|null, "seed": N, "noise": bool}`;
-/// only `dataset` is required.
+/// `{"dataset": "...", "frames": N|null, "trajectory": "..."|null, "seed": N, "noise": bool,
+/// "scene": N, "drop_frames": R, "drop_burst": N, "speed": N, "start": S}`; only `dataset` is
+/// required.
 fn parse_dataset_args(v: &serde_json::Value) -> anyhow::Result<DatasetArgs> {
     let field = |name: &str| v.get(name).filter(|x| !x.is_null());
     let dataset = field("dataset")
@@ -257,12 +258,30 @@ fn parse_dataset_args(v: &serde_json::Value) -> anyhow::Result<DatasetArgs> {
             .as_bool()
             .context("\"dataset_args.noise\" must be true or false")?,
     };
+    let defaults = DatasetArgs::default();
+    let count = |name: &str, default: u64| match field(name) {
+        None => Ok(default),
+        Some(x) => x
+            .as_u64()
+            .with_context(|| format!("\"dataset_args.{name}\" must be a whole number")),
+    };
+    let number = |name: &str, default: f64| match field(name) {
+        None => Ok(default),
+        Some(x) => x
+            .as_f64()
+            .with_context(|| format!("\"dataset_args.{name}\" must be a number")),
+    };
     Ok(DatasetArgs {
         dataset,
         frames,
         trajectory,
         seed,
         noise,
+        scene: count("scene", defaults.scene)?,
+        drop_frames: number("drop_frames", defaults.drop_frames)?,
+        drop_burst: count("drop_burst", defaults.drop_burst as u64)? as usize,
+        speed: count("speed", defaults.speed as u64)? as usize,
+        start: number("start", defaults.start)?,
     })
 }
 
