@@ -7,7 +7,7 @@ use opengs_e2e::{binary, opengs_run, serial};
 
 fn fr1_xyz() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("../../shared/data/tum_trajectories/freiburg1_xyz-groundtruth.txt")
+        .join("../data/tum_trajectories/freiburg1_xyz-groundtruth.txt")
 }
 
 /// Runs the pipeline and returns metrics.json.

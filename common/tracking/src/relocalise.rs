@@ -3,7 +3,8 @@
 //! relocaliser hands out starting guesses, a few per frame so a lost frame
 //! costs about what a tracked one does: the last verified pose, that pose
 //! panned, tilted and moved along each camera axis (one ring, then one twice
-//! as wide), and the poses of the keyframes nearest to it. Each guess goes
+//! as wide), then the poses of every keyframe, nearest first (a camera that
+//! comes back to where it mapped is near one of them). Each guess goes
 //! through the full coarse-to-fine registration and the verification, with a
 //! stricter fitness since no motion prior vouches for the answer.
 
@@ -20,8 +21,6 @@ pub struct RelocaliseConfig {
     /// Translation (m) and rotation (rad) of the inner ring of guesses.
     pub step: f64,
     pub turn: f64,
-    /// Keyframe poses (nearest to the last verified pose) added as guesses.
-    pub keyframe_guesses: usize,
     /// The verification a relocalised pose must pass (no motion prior).
     pub verify: VerifyConfig,
 }
@@ -32,7 +31,6 @@ impl Default for RelocaliseConfig {
             guesses_per_frame: 2,
             step: 0.15,
             turn: 12f64.to_radians(),
-            keyframe_guesses: 4,
             verify: VerifyConfig {
                 min_fitness: 0.6,
                 ..VerifyConfig::default()
@@ -49,8 +47,8 @@ pub struct Relocaliser {
 }
 
 impl Relocaliser {
-    /// A new lost spell: guesses around `anchor` (the last verified pose), and the
-    /// keyframe poses nearest to it.
+    /// A new lost spell: guesses around `anchor` (the last verified pose), then every
+    /// keyframe pose, nearest to it first.
     pub fn start(anchor: &Pose, keyframe_poses: &[Pose], config: &RelocaliseConfig) -> Self {
         let mut guesses = vec![*anchor];
         for scale in [1.0, 2.0] {
@@ -79,12 +77,7 @@ impl Relocaliser {
             .filter(|(distance, _)| *distance > 1e-6)
             .collect();
         nearest.sort_by(|a, b| a.0.total_cmp(&b.0));
-        guesses.extend(
-            nearest
-                .into_iter()
-                .take(config.keyframe_guesses)
-                .map(|(_, p)| p),
-        );
+        guesses.extend(nearest.into_iter().map(|(_, p)| p));
         Self { guesses, next: 0 }
     }
 

@@ -9,7 +9,7 @@ use opengs_tracking::{DepthFrame, FrameTracker, TrackStatus, TrackerConfig};
 
 fn fr1_xyz() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("../../../shared/data/tum_trajectories/freiburg1_xyz-groundtruth.txt")
+        .join("../../data/tum_trajectories/freiburg1_xyz-groundtruth.txt")
 }
 
 fn depth_frame<'a>(

@@ -14,6 +14,9 @@ enum BenchWhat {
     Ipc(super::bench_ipc::BenchIpcArgs),
     /// Render speed of the GS Voting rasterizer (colour+depth vs +labels+top-K).
     Render(super::bench_render::BenchRenderArgs),
+    /// The SLAM scene suite through the real pipeline: generated rooms × camera paths ×
+    /// noise; ATE, PSNR, holes, mIoU, lost frames, tracker p99 per case and the worst row.
+    Slam(super::bench_slam::BenchSlamArgs),
     /// G-ICP registration time and tracker throughput.
     Gicp(super::bench_gicp::BenchGicpArgs),
     /// One mapping step (forward + backward + Adam) with 100k Gaussians at 640×480 and
@@ -41,6 +44,7 @@ pub fn run(args: BenchArgs) -> anyhow::Result<()> {
         BenchWhat::Ipc(a) => super::bench_ipc::run(a),
         BenchWhat::Render(a) => super::bench_render::run(a),
         BenchWhat::Gicp(a) => super::bench_gicp::run(a),
+        BenchWhat::Slam(a) => super::bench_slam::run(a),
         BenchWhat::Map(a) => super::bench_map::run(a),
         BenchWhat::Consensus { runs } => {
             opengs_semantics::bench::print_consensus_bench(runs);

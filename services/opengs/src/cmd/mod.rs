@@ -4,6 +4,7 @@ pub mod bench_gicp;
 pub mod bench_ipc;
 pub mod bench_map;
 pub mod bench_render;
+pub mod bench_slam;
 pub mod ctl;
 pub mod eval;
 pub mod models;
