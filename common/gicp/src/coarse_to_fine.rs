@@ -6,8 +6,8 @@
 //!
 //! ```text
 //! stage   source          target           max correspondence
-//! 1       8 cm voxels     5 cm voxels      30 cm
-//! 2       4 cm voxels     5 cm voxels      10 cm
+//! 1       12 cm voxels    5 cm voxels      30 cm
+//! 2       6 cm voxels     5 cm voxels      10 cm
 //! 3       every point     every point      RegistrationConfig (3 cm TUM)
 //! ```
 //!
@@ -44,16 +44,16 @@ pub struct CoarseToFine {
 
 impl Default for CoarseToFine {
     fn default() -> Self {
-        let stage = |distance: f64, source_voxel: f64| Stage {
+        let stage = |distance: f64, source_voxel: f64, coarse_target: bool| Stage {
             max_correspondence_distance: distance,
             source_voxel,
-            coarse_target: true,
-            max_iterations: 20,
+            coarse_target,
+            max_iterations: 15,
             epsilon_scale: 4.0,
         };
         Self {
             coarse_voxel: 0.05,
-            stages: vec![stage(0.3, 0.08), stage(0.1, 0.04)],
+            stages: vec![stage(0.3, 0.12, true), stage(0.1, 0.06, true)],
         }
     }
 }
@@ -80,9 +80,9 @@ impl CoarseToFineTarget {
     pub fn new(cloud: Cloud, coarse_voxel: f64) -> Self {
         let coarse = Target::new(cloud.voxel_subsample(coarse_voxel));
         let fine = Target::new(cloud);
-        // Wide stages search beyond the grid's radius: the kd-trees are built now.
+        // Wide stages search the coarse level beyond the grid's radius: its kd-tree is
+        // built now (the fine level is searched within the radius: its grid suffices).
         let _ = coarse.tree();
-        let _ = fine.tree();
         Self { fine, coarse }
     }
 
@@ -114,6 +114,19 @@ pub fn register_coarse_to_fine(
     fine: &RegistrationConfig,
     schedule: &CoarseToFine,
 ) -> Result<Registration, GicpError> {
+    let estimate = coarse_estimate(source, target, initial, fine, schedule);
+    register(source, target.fine(), &estimate, fine)
+}
+
+/// The estimate after the coarse stages of `schedule` alone (cheap: thinned source,
+/// coarse target), for screening a starting guess before the fine registration.
+pub fn coarse_estimate(
+    source: &Cloud,
+    target: &CoarseToFineTarget,
+    initial: &Isometry3<f64>,
+    fine: &RegistrationConfig,
+    schedule: &CoarseToFine,
+) -> Isometry3<f64> {
     let mut estimate = *initial;
     for stage in &schedule.stages {
         let config = RegistrationConfig {
@@ -139,7 +152,7 @@ pub fn register_coarse_to_fine(
             estimate = r.transform;
         }
     }
-    register(source, target.fine(), &estimate, fine)
+    estimate
 }
 
 #[cfg(test)]

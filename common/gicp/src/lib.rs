@@ -41,7 +41,9 @@ mod target;
 mod voxel;
 
 pub use cloud::Cloud;
-pub use coarse_to_fine::{register_coarse_to_fine, CoarseToFine, CoarseToFineTarget, Stage};
+pub use coarse_to_fine::{
+    coarse_estimate, register_coarse_to_fine, CoarseToFine, CoarseToFineTarget, Stage,
+};
 pub use config::{RegistrationConfig, Solver};
 pub use covariance::{
     covariance_from_gaussian, estimate_covariances, regularize, Regularization, DEFAULT_NEIGHBOURS,

@@ -1,5 +1,7 @@
 use opengs_splat::{LossWeights, PruneConfig};
 
+use crate::HoleFilling;
+
 /// Mapper settings; defaults follow METHOD §8 for TUM-size images.
 #[derive(Debug, Clone, PartialEq)]
 pub struct MapperConfig {
@@ -21,6 +23,8 @@ pub struct MapperConfig {
     pub prune_every: u64,
     pub prune: PruneConfig,
     pub loss: LossWeights,
+    /// Where keyframe depth the map leaves open also becomes Gaussians.
+    pub holes: HoleFilling,
     /// Gaussians above this opacity are given to the tracker (0.09 TUM, 0.05 Replica).
     pub trackable_opacity: f32,
     /// Extent (m) that scales the position learning rate (3DGS: 1.6e-4 × extent). 0.1 m, not
@@ -44,6 +48,7 @@ impl Default for MapperConfig {
             half_resolution: true,
             prune_every: 300,
             prune: PruneConfig::default(),
+            holes: HoleFilling::default(),
             loss: LossWeights::default(),
             trackable_opacity: 0.09,
             scene_extent: 0.1,

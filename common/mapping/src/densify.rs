@@ -1,9 +1,12 @@
 use nalgebra::{Matrix3, Point3, Rotation3, SymmetricEigen, UnitQuaternion};
 use opengs_geometry::{Intrinsics, Pose};
-use opengs_gicp::{NeighbourGrid, PointTree};
-use opengs_splat::Gaussian;
+use opengs_gicp::{
+    estimate_covariances_on_grid, sample_depth_grid, NeighbourGrid, PointTree, Regularization,
+    DEFAULT_NEIGHBOURS,
+};
+use opengs_splat::{render, Camera, Gaussian, GaussianMap, RenderRequest};
 
-/// A keyframe's points as the tracker sent them.
+/// A keyframe as the tracker sent it: its points, and its images.
 pub struct DensifyInput<'a> {
     /// World-frame points.
     pub points: &'a [[f32; 3]],
@@ -14,6 +17,36 @@ pub struct DensifyInput<'a> {
     pub intrinsics: Intrinsics,
     /// RGB8 of the keyframe, row-major.
     pub rgb: &'a [u8],
+    /// Raw depth of the keyframe, row-major (0 = missing), and its units per metre.
+    pub depth: &'a [u16],
+    pub depth_scale: f32,
+}
+
+/// Where the map leaves a keyframe open (SplaTAM's densification): rendered at the
+/// keyframe, a pixel with valid depth is a hole when it accumulates α below
+/// `max_silhouette`, or when the map's surface there lies behind the observed one by more
+/// than `max(min_depth_error, depth_error_fraction × z)` (something new in front).
+#[derive(Debug, Clone, PartialEq)]
+pub struct HoleFilling {
+    /// Depth samples are taken every this many pixels (the tracker's stride).
+    pub stride: usize,
+    pub max_silhouette: f32,
+    pub min_depth_error: f32,
+    pub depth_error_fraction: f32,
+    /// Depth beyond this (m) is not mapped.
+    pub max_depth: f64,
+}
+
+impl Default for HoleFilling {
+    fn default() -> Self {
+        Self {
+            stride: 5,
+            max_silhouette: 0.5,
+            min_depth_error: 0.05,
+            depth_error_fraction: 0.05,
+            max_depth: 10.0,
+        }
+    }
 }
 
 /// Neighbours whose mean distance sets a point's size (the local sample spacing).
@@ -98,6 +131,87 @@ pub fn gaussians_from_points(
     out
 }
 
+/// New Gaussians for the depth samples of a keyframe that `map`, rendered at `camera` (the
+/// keyframe's camera at any resolution), leaves open ([`HoleFilling`]): mean = the sample,
+/// shape = its grid covariance, largest axis = `scale` × the pixel footprint of the stride.
+pub fn gaussians_for_holes(
+    input: &DensifyInput,
+    map: &GaussianMap,
+    camera: &Camera,
+    holes: &HoleFilling,
+    opacity: f32,
+    scale: f32,
+) -> Vec<Gaussian> {
+    let k = &input.intrinsics;
+    let Ok(samples) = sample_depth_grid(
+        input.depth,
+        input.depth_scale as f64,
+        k,
+        holes.stride,
+        holes.max_depth,
+    ) else {
+        return Vec::new();
+    };
+    if samples.points.is_empty() {
+        return Vec::new();
+    }
+    let Ok(covariances) = estimate_covariances_on_grid(
+        &samples,
+        DEFAULT_NEIGHBOURS,
+        Regularization::NormalizedEllipse,
+    ) else {
+        return Vec::new();
+    };
+    let out = render(map, camera, &RenderRequest::color_depth()).output;
+    let (rw, rh) = (camera.width() as usize, camera.height() as usize);
+    let (sx, sy) = (rw as f64 / k.width as f64, rh as f64 / k.height as f64);
+    let rotation = input.pose.rotation.to_rotation_matrix().into_inner();
+    let mut new = Vec::new();
+    for ((p, &(u, v)), cov) in samples.points.iter().zip(&samples.pixels).zip(&covariances) {
+        let (ru, rv) = (
+            ((u as f64 * sx) as usize).min(rw - 1),
+            ((v as f64 * sy) as usize).min(rh - 1),
+        );
+        let i = rv * rw + ru;
+        let alpha = out.silhouette[i];
+        let z = p.z as f32;
+        let open = alpha < holes.max_silhouette || {
+            let rendered_z = out.depth[i] / alpha;
+            rendered_z - z > holes.min_depth_error.max(holes.depth_error_fraction * z)
+        };
+        if !open {
+            continue;
+        }
+        let px = (v as usize * k.width as usize + u as usize) * 3;
+        let Some(c) = input.rgb.get(px..px + 3) else {
+            continue;
+        };
+        let world = input.pose * p;
+        let c_world = rotation * cov * rotation.transpose();
+        let spacing = holes.stride as f64 * p.z / k.fx;
+        let (rot, axes) = shape(
+            &[
+                c_world[(0, 0)] as f32,
+                c_world[(0, 1)] as f32,
+                c_world[(0, 2)] as f32,
+                c_world[(1, 1)] as f32,
+                c_world[(1, 2)] as f32,
+                c_world[(2, 2)] as f32,
+            ],
+            spacing * scale as f64,
+        );
+        new.push(Gaussian::from_values(
+            [world.x as f32, world.y as f32, world.z as f32],
+            rot,
+            axes,
+            opacity,
+            [0, 1, 2].map(|j| c[j] as f32 / 255.0),
+            0,
+        ));
+    }
+    new
+}
+
 /// Rotation (w, x, y, z) and scales (m) of a Gaussian with the covariance's shape and `spacing` size.
 fn shape(cov: &[f32; 6], spacing: f64) -> ([f32; 4], [f32; 3]) {
     let c = cov.map(|v| v as f64);
@@ -167,6 +281,8 @@ mod tests {
             pose: Pose::identity(),
             intrinsics: k,
             rgb: &rgb,
+            depth: &[],
+            depth_scale: 1000.0,
         };
         let all = gaussians_from_points(&input, &[], 0.02, 0.1, 1.0);
         assert_eq!(all.len(), 2);
@@ -180,5 +296,60 @@ mod tests {
         let new = gaussians_from_points(&input, &near, 0.02, 0.1, 1.0);
         assert_eq!(new.len(), 1);
         assert!((new[0].mean[1] - points[1][1]).abs() < 1e-6);
+    }
+
+    /// A 40×30 camera 2 m in front of a wall (depth 2 m everywhere), grey.
+    fn wall(k: &Intrinsics) -> (Vec<u16>, Vec<u8>) {
+        let n = (k.width * k.height) as usize;
+        (vec![2000u16; n], vec![128u8; 3 * n])
+    }
+
+    #[test]
+    fn holes_are_where_the_render_is_empty_or_behind_the_observed_surface() {
+        let k = Intrinsics::new(40.0, 40.0, 19.5, 14.5, 40, 30);
+        let (depth, rgb) = wall(&k);
+        let input = DensifyInput {
+            points: &[],
+            covariances: &[],
+            pose: Pose::identity(),
+            intrinsics: k,
+            rgb: &rgb,
+            depth: &depth,
+            depth_scale: 1000.0,
+        };
+        let camera = Camera::from_pose(k, &Pose::identity(), 0.05);
+        let holes = HoleFilling::default();
+        // An empty map: every 5th pixel of the 40×30 frame is a hole (8 × 6 samples).
+        let all = gaussians_for_holes(&input, &GaussianMap::new(), &camera, &holes, 0.9, 0.7);
+        assert_eq!(all.len(), 48);
+        assert!(all.iter().all(|g| (g.mean[2] - 2.0).abs() < 1e-6));
+        // Those Gaussians close the wall: nothing left open.
+        let mut map = GaussianMap::new();
+        all.iter().for_each(|g| map.push(*g));
+        assert!(gaussians_for_holes(&input, &map, &camera, &holes, 0.9, 0.7).is_empty());
+        // The same wall mapped 1 m too far (3 m): the observed surface is 1 m in front of
+        // the map's, more than max(5 cm, 5 % of 2 m): all open again.
+        let mut far = GaussianMap::new();
+        for g in &all {
+            let mut moved = *g;
+            moved.mean = [g.mean[0] * 1.5, g.mean[1] * 1.5, 3.0];
+            moved.log_scale = g.log_scale.map(|l| l + 1.5f32.ln());
+            far.push(moved);
+        }
+        let in_front = gaussians_for_holes(&input, &far, &camera, &holes, 0.9, 0.7);
+        assert_eq!(in_front.len(), 48);
+        // Only the right half mapped (u ≥ 20): the left half's samples (u < 20: 4 of 8
+        // columns, 24 samples) open, and at most the column at its edge.
+        let mut half = GaussianMap::new();
+        all.iter()
+            .filter(|g| g.mean[0] > 0.0)
+            .for_each(|g| half.push(*g));
+        let left = gaussians_for_holes(&input, &half, &camera, &holes, 0.9, 0.7);
+        assert!(
+            left.iter().all(|g| g.mean[0] < 0.05),
+            "{:?}",
+            left.iter().map(|g| g.mean[0]).collect::<Vec<_>>()
+        );
+        assert!((24..=30).contains(&left.len()), "{}", left.len());
     }
 }

@@ -11,7 +11,7 @@ mod pixel_top_k;
 mod semantic;
 
 pub use config::MapperConfig;
-pub use densify::{gaussians_from_points, DensifyInput};
+pub use densify::{gaussians_for_holes, gaussians_from_points, DensifyInput, HoleFilling};
 pub use keyframe::StoredKeyframe;
 pub use mapper::{Mapper, TrackableGaussians};
 pub use pixel_top_k::PixelTopK;

@@ -2,11 +2,11 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
 use opengs_splat::{
-    prune, train_step, Adam, AdamConfig, GaussianMap, Rendered, StepStats, TrainConfig,
+    prune, train_step, Adam, AdamConfig, Camera, GaussianMap, Rendered, StepStats, TrainConfig,
     TrainWorkspace,
 };
 
-use crate::densify::{gaussians_from_points, DensifyInput};
+use crate::densify::{gaussians_for_holes, gaussians_from_points, DensifyInput};
 use crate::semantic::PendingRenders;
 use crate::{MapperConfig, StoredKeyframe};
 
@@ -83,22 +83,41 @@ impl Mapper {
         self.iterations
     }
 
-    /// Adds a keyframe: new Gaussians where the map is empty, and the frame as a training target.
-    /// Returns how many Gaussians were added.
+    /// Adds a keyframe: new Gaussians at its points where no Gaussian is near (METHOD §8),
+    /// then at its depth samples the map still leaves open ([`crate::HoleFilling`]), and the
+    /// frame as a training target. Returns how many Gaussians were added.
     pub fn add_keyframe(&mut self, input: &DensifyInput, keyframe: StoredKeyframe) -> usize {
-        let new = gaussians_from_points(
+        let near = gaussians_from_points(
             input,
             &self.map.means,
             self.config.overlap_distance,
             self.config.initial_opacity,
             self.config.initial_scale,
         );
-        for g in &new {
+        for g in &near {
             self.map.push(*g);
         }
+        let holes = self.fill_holes(input, &keyframe.camera);
         self.adam.resize(self.map.len());
         self.keyframes.push(keyframe);
         self.fresh.push(self.keyframes.len() - 1);
+        near.len() + holes
+    }
+
+    /// Gaussians where the map rendered at `camera` (the keyframe's) leaves its depth open;
+    /// returns how many were added. The caller resizes the optimiser state.
+    fn fill_holes(&mut self, input: &DensifyInput, camera: &Camera) -> usize {
+        let new = gaussians_for_holes(
+            input,
+            &self.map,
+            camera,
+            &self.config.holes,
+            self.config.initial_opacity,
+            self.config.initial_scale,
+        );
+        for g in &new {
+            self.map.push(*g);
+        }
         new.len()
     }
 

@@ -50,6 +50,8 @@ fn keyframes_become_gaussians_and_optimisation_raises_psnr() {
             pose: out.pose,
             intrinsics: k,
             rgb: &f.rgb,
+            depth: &f.depth,
+            depth_scale: f.depth_scale,
         };
         let kf = StoredKeyframe::new(
             i as u64,

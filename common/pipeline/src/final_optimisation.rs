@@ -11,9 +11,10 @@ use std::time::{Duration, Instant};
 
 use opengs_datasets::RgbdFrame;
 use opengs_geometry::{Intrinsics, Pose};
+use opengs_mapping::{gaussians_for_holes, DensifyInput, MapperConfig};
 use opengs_quality::{refine, RefineConfig, RefineStats};
 use opengs_runtime::{CallbackProgression, WaitSet};
-use opengs_splat::GaussianMap;
+use opengs_splat::{downscale_camera2, Camera, GaussianMap};
 
 /// The signal the supervisor sends a stage to ask it to finish its work and exit.
 pub const FINISH_SIGNAL: i32 = libc::SIGUSR1;
@@ -97,6 +98,39 @@ impl KeptKeyframes {
     pub fn is_empty(&self) -> bool {
         self.frames.is_empty()
     }
+}
+
+/// Closes what the final optimisation's pruning opened: the depth each kept keyframe sees
+/// that the map, rendered there (at half resolution), leaves open becomes new Gaussians
+/// ([`opengs_mapping::HoleFilling`]). Returns how many were added.
+pub fn fill_holes(map: &mut GaussianMap, kept: &KeptKeyframes, config: &MapperConfig) -> usize {
+    let Some(k) = kept.intrinsics else {
+        return 0;
+    };
+    let mut added = 0;
+    for (frame, pose) in &kept.frames {
+        let input = DensifyInput {
+            points: &[],
+            covariances: &[],
+            pose: *pose,
+            intrinsics: k,
+            rgb: &frame.rgb,
+            depth: &frame.depth,
+            depth_scale: frame.depth_scale,
+        };
+        let camera = downscale_camera2(&Camera::from_pose(k, pose, config.near));
+        let new = gaussians_for_holes(
+            &input,
+            map,
+            &camera,
+            &config.holes,
+            config.initial_opacity,
+            config.initial_scale,
+        );
+        added += new.len();
+        new.iter().for_each(|g| map.push(*g));
+    }
+    added
 }
 
 /// Runs `steps` full-resolution steps on the kept keyframes. `progress(done, loss)` is called

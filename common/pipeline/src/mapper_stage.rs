@@ -22,7 +22,7 @@ use opengs_runtime::{
 use opengs_semantics::{CounterPruneRegion, RelabelInstruction};
 use opengs_splat::{read_ply_file, write_ply_file, Camera, GaussianMap};
 
-use crate::final_optimisation::{finish_requested_flag, optimise_final, KeptKeyframes};
+use crate::final_optimisation::{fill_holes, finish_requested_flag, optimise_final, KeptKeyframes};
 
 /// Options of the mapper stage.
 #[derive(clap::Args, Debug, Clone)]
@@ -133,6 +133,8 @@ impl MapperStage {
             pose,
             intrinsics: k,
             rgb: view.rgb,
+            depth: view.depth,
+            depth_scale: h.depth_scale,
         };
         let mapper = &mut self.mapper;
         let added = pool.install(|| mapper.add_keyframe(&input, stored));
@@ -322,9 +324,9 @@ pub fn run_mapper(ctx: &RunContext, out_dir: &Path, args: &MapperArgs) -> anyhow
             checkpoint.display(),
             map.len()
         );
-        Mapper::with_map(config, map)
+        Mapper::with_map(config.clone(), map)
     } else {
-        Mapper::new(config)
+        Mapper::new(config.clone())
     };
     let mut stage = MapperStage {
         mapper,
@@ -436,6 +438,7 @@ pub fn run_mapper(ctx: &RunContext, out_dir: &Path, args: &MapperArgs) -> anyhow
     } = stage;
     let mut map = mapper.into_map();
     let mut finish_stats = None;
+    let mut holes_filled = None;
     if let Some(kept) = kept.filter(|_| finishing) {
         let steps = args.finish_steps;
         tracing::info!(
@@ -489,6 +492,11 @@ pub fn run_mapper(ctx: &RunContext, out_dir: &Path, args: &MapperArgs) -> anyhow
         })?;
         let done = finish_stats.as_ref().map_or(0, |s| s.iterations);
         telemetry.progress(done as u32, steps as u32);
+        holes_filled = Some(pool.install(|| fill_holes(&mut map, &kept, &config)));
+        tracing::info!(
+            "after the final optimisation: {} Gaussians where the kept keyframes saw holes",
+            holes_filled.unwrap_or(0)
+        );
     }
     let seconds = started.elapsed().as_secs_f64();
     if !map.is_empty() {
@@ -503,6 +511,7 @@ pub fn run_mapper(ctx: &RunContext, out_dir: &Path, args: &MapperArgs) -> anyhow
         "keyframes": keyframes,
         "bytes_per_gaussian": GaussianMap::bytes_per_gaussian(),
         "final_optimisation": finish_stats,
+        "holes_filled": holes_filled,
         "total_seconds": seconds,
     });
     std::fs::write(

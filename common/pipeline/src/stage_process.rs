@@ -118,11 +118,17 @@ impl StageProcess {
             .process_group(0);
         let cpus = self.spec.cpus.clone();
         let nice = self.spec.nice;
+        let policy = self.spec.scheduler.policy();
         // SAFETY: only async-signal-safe libc calls between fork and exec.
         unsafe {
             cmd.pre_exec(move || {
                 // Die with the supervisor, whatever kills it.
                 libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGTERM);
+                if policy != libc::SCHED_OTHER {
+                    let param = libc::sched_param { sched_priority: 0 };
+                    // Ignore failure (a kernel without the policy): normal scheduling.
+                    libc::sched_setscheduler(0, policy, &param);
+                }
                 if nice != 0 {
                     libc::setpriority(libc::PRIO_PROCESS, 0, nice);
                 }

@@ -1,7 +1,6 @@
 //! The tracker stage: frames in, a pose for every frame and keyframes out.
 
 use opengs_geometry::{pose_from_tum, pose_to_tum, Intrinsics};
-use opengs_gicp::Gaussian;
 use opengs_ipc_schema::service::{FRAMES, KEYFRAMES, MAP_TARGET, POSES};
 use opengs_ipc_schema::{
     now_ns, FrameHeader, FrameView, KeyframeHeader, KeyframeParts, MapTargetHeader, MessageKind,
@@ -11,7 +10,7 @@ use opengs_runtime::{
     waitset, CallbackProgression, Inlet, Outlet, RunContext, TelemetrySink, WaitSetRunResult,
 };
 use opengs_tracking::{
-    DepthFrame, FrameTracker, ModelUpdate, TrackOutcome, TrackStatus, TrackerConfig,
+    DepthFrame, FrameTracker, MapGaussians, ModelUpdate, TrackOutcome, TrackStatus, TrackerConfig,
 };
 
 /// Options of the tracker stage.
@@ -62,22 +61,16 @@ impl TrackerStage {
         let Some(tracker) = self.tracker.as_mut() else {
             return;
         };
-        let gaussians: Vec<Gaussian> = view
-            .means
-            .iter()
-            .zip(view.rotations)
-            .zip(view.scales)
-            .map(|((m, r), s)| Gaussian {
-                mean: [m[0] as f64, m[1] as f64, m[2] as f64].into(),
-                rotation: r.map(|v| v as f64),
-                scale: [s[0] as f64, s[1] as f64, s[2] as f64].into(),
-            })
-            .collect();
+        let gaussians = MapGaussians {
+            means: view.means.to_vec(),
+            rotations: view.rotations.to_vec(),
+            scales: view.scales.to_vec(),
+        };
         tracing::debug!(
             "map v{} as of keyframe #{} ({} Gaussians) to the model thread",
             h.map_version,
             h.stamp.seq,
-            gaussians.len()
+            gaussians.means.len()
         );
         tracker.set_map(h.stamp.seq, gaussians);
     }
@@ -188,6 +181,10 @@ fn log_outcome(seq: u64, out: &TrackOutcome) {
             ),
             ModelUpdate::Refused(why) => tracing::warn!("{why}; keeping the current model"),
         }
+    }
+    tracing::trace!("frame #{seq}: {} iterations", out.iterations);
+    if let Some(why) = &out.wide_search {
+        tracing::debug!("frame #{seq}: wide search ({why})");
     }
     match (&out.failure, out.status) {
         (Some(why), _) => tracing::warn!("frame #{seq}: {:?} ({why})", out.status),

@@ -7,7 +7,7 @@ use opengs_geometry::nalgebra::{Isometry3, Vector3};
 use opengs_gicp::{
     register_coarse_to_fine, sample_depth_grid, Cloud, CoarseToFine, CoarseToFineTarget,
 };
-use opengs_tracking::TrackerConfig;
+use opengs_tracking::{check_visibility, DepthFrame, TrackerConfig, VisibilityMargin};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let fine_only = std::env::args().nth(1).as_deref() == Some("fine");
@@ -66,7 +66,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                     .normalize();
                 let truth = p0 * Isometry3::new(tdir * cm / 100.0, axis * deg.to_radians());
                 let view = render(&scene, &k, &truth);
-                let c = cloud(&quantize_depth(&view.depth, 5000.0), 5000.0)?;
+                let depth = quantize_depth(&view.depth, 5000.0);
+                let c = cloud(&depth, 5000.0)?;
                 let t0 = std::time::Instant::now();
                 let r = register_coarse_to_fine(&c, &target, &p0, &cfg.registration, &schedule);
                 let ms = t0.elapsed().as_secs_f64() * 1e3;
@@ -75,10 +76,22 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                     Ok(r) => {
                         let e = truth.inverse() * r.transform;
                         let ok = e.translation.vector.norm() < 0.005;
+                        let frame = DepthFrame {
+                            depth: &depth,
+                            depth_scale: 5000.0,
+                            intrinsics: &k,
+                            timestamp: 0.0,
+                        };
+                        let seen = check_visibility(
+                            target.coarse().points(),
+                            &r.transform,
+                            &frame,
+                            &VisibilityMargin::default(),
+                        );
                         right += ok as usize;
-                        println!("{} base {base:3} {cm:4.0} cm {deg:3.0}° dir {dir}: err {:6.2} cm {:5.2}° fit {:.2} rmse {:.2} cm cond {:.1e} it {:2} {ms:5.1} ms",
+                        println!("{} base {base:3} {cm:4.0} cm {deg:3.0}° dir {dir}: err {:6.2} cm {:5.2}° fit {:.2} rmse {:.2} cm cond {:.1e} through {:.2} it {:2} {ms:5.1} ms",
                             if ok { "ok " } else { "BAD" }, e.translation.vector.norm() * 100.0, e.rotation.angle().to_degrees(),
-                            r.fitness, r.inlier_rmse * 100.0, r.conditioning, r.iterations);
+                            r.fitness, r.inlier_rmse * 100.0, r.conditioning, seen.violation_ratio(), r.iterations);
                     }
                     Err(e) => println!("ERR base {base} {cm} cm {deg}° dir {dir}: {e}"),
                 }

@@ -11,12 +11,14 @@ mod model;
 mod motion;
 mod relocalise;
 mod verify;
+mod visibility;
 
 pub use config::TrackerConfig;
 pub use frame_tracker::{
     DepthFrame, FrameTracker, KeyframeKind, TrackOutcome, TrackStatus, WorldKeyframeCloud,
 };
-pub use model::{ModelBuilder, ModelUpdate, TrackingModel};
+pub use model::{MapGaussians, ModelBuilder, ModelUpdate, TrackingModel};
 pub use motion::ConstantVelocity;
 pub use relocalise::{RelocaliseConfig, Relocaliser};
-pub use verify::{verify, MotionPrior, Rejection, VerifyConfig};
+pub use verify::{verify, verify_visibility, MotionPrior, Rejection, VerifyConfig};
+pub use visibility::{check_visibility, Visibility, VisibilityMargin};

@@ -66,11 +66,37 @@ struct ModelInputs {
     coarse_voxel: f64,
 }
 
+/// The map's trackable Gaussians as messages carry them (copied out of shared memory; the
+/// conversion to the tracker's terms happens on the builder's thread).
+#[derive(Debug, Clone, Default)]
+pub struct MapGaussians {
+    pub means: Vec<[f32; 3]>,
+    /// Unit quaternions (w, x, y, z).
+    pub rotations: Vec<[f32; 4]>,
+    /// Per-axis standard deviations (m).
+    pub scales: Vec<[f32; 3]>,
+}
+
+impl MapGaussians {
+    fn to_gaussians(&self) -> Vec<Gaussian> {
+        self.means
+            .iter()
+            .zip(&self.rotations)
+            .zip(&self.scales)
+            .map(|((m, r), s)| Gaussian {
+                mean: [m[0] as f64, m[1] as f64, m[2] as f64].into(),
+                rotation: r.map(|v| v as f64),
+                scale: [s[0] as f64, s[1] as f64, s[2] as f64].into(),
+            })
+            .collect()
+    }
+}
+
 /// One change to the inputs.
 enum Job {
     Map {
         seq: u64,
-        gaussians: Vec<Gaussian>,
+        gaussians: MapGaussians,
         regularization: Regularization,
     },
     Keyframe {
@@ -88,7 +114,7 @@ impl ModelInputs {
                 gaussians,
                 regularization,
             } => {
-                let cloud = Cloud::from_gaussians(&gaussians, regularization)
+                let cloud = Cloud::from_gaussians(&gaussians.to_gaussians(), regularization)
                     .map_err(|e| format!("map #{seq}: {e}"))?;
                 if let Err(e) = cloud.check_registrable("map") {
                     return Err(format!("map #{seq} cannot fix a pose yet: {e}"));
@@ -217,7 +243,7 @@ impl ModelBuilder {
     }
 
     /// The map's trackable Gaussians as of keyframe `seq`.
-    pub fn set_map(&mut self, seq: u64, gaussians: Vec<Gaussian>, regularization: Regularization) {
+    pub fn set_map(&mut self, seq: u64, gaussians: MapGaussians, regularization: Regularization) {
         self.submit(Job::Map {
             seq,
             gaussians,
@@ -263,7 +289,7 @@ impl Drop for ModelBuilder {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use opengs_gicp::nalgebra::{Matrix3, Point3, Vector3};
+    use opengs_gicp::nalgebra::{Matrix3, Point3};
 
     fn plane_cloud(z: f64, n: usize) -> Cloud {
         let mut points = Vec::new();
@@ -280,16 +306,17 @@ mod tests {
         Cloud::from_parts(points, covariances).expect("same length")
     }
 
-    fn gaussians(n: usize) -> Vec<Gaussian> {
-        plane_cloud(1.0, n)
+    fn gaussians(n: usize) -> MapGaussians {
+        let means: Vec<[f32; 3]> = plane_cloud(1.0, n)
             .points
-            .into_iter()
-            .map(|mean| Gaussian {
-                mean,
-                rotation: [1.0, 0.0, 0.0, 0.0],
-                scale: Vector3::new(0.01, 0.01, 0.001),
-            })
-            .collect()
+            .iter()
+            .map(|p| [p.x as f32, p.y as f32, p.z as f32])
+            .collect();
+        MapGaussians {
+            rotations: vec![[1.0, 0.0, 0.0, 0.0]; means.len()],
+            scales: vec![[0.01, 0.01, 0.001]; means.len()],
+            means,
+        }
     }
 
     #[test]
@@ -319,7 +346,7 @@ mod tests {
         b.add_keyframe(1, plane_cloud(0.0, 10));
         let _ = b.finished();
         let mut bad = gaussians(5);
-        bad[2].rotation = [0.0; 4];
+        bad.rotations[2] = [0.0; 4];
         b.set_map(4, bad, Regularization::default());
         let out = b.finished();
         assert!(

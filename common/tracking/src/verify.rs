@@ -11,9 +11,13 @@
 //! - **agreement with the motion prior**: no further from the constant-velocity
 //!   prediction than a hand-held camera moves in the time since the last
 //!   verified frame (with a floor for jitter).
+//! - **visibility** ([`verify_visibility`]): few model points in front of the
+//!   depth the frame measured.
 
 use opengs_geometry::Pose;
 use opengs_gicp::Registration;
+
+use crate::visibility::{Visibility, VisibilityMargin};
 
 /// Thresholds of [`verify`].
 #[derive(Debug, Clone, PartialEq)]
@@ -28,6 +32,10 @@ pub struct VerifyConfig {
     /// … with these allowances whatever the time (m, rad).
     pub min_jump: f64,
     pub min_turn: f64,
+    /// Largest share of the model points in view that may lie in front of the measured
+    /// depth ([`crate::visibility`]), and the margins of that comparison.
+    pub max_violation: f64,
+    pub visibility_margin: VisibilityMargin,
 }
 
 impl Default for VerifyConfig {
@@ -40,6 +48,8 @@ impl Default for VerifyConfig {
             max_angular_speed: 180f64.to_radians(),
             min_jump: 0.15,
             min_turn: 10f64.to_radians(),
+            max_violation: 0.1,
+            visibility_margin: VisibilityMargin::default(),
         }
     }
 }
@@ -51,6 +61,7 @@ pub enum Rejection {
     LargeResidual { rmse: f64, max: f64 },
     IllConditioned { conditioning: f64, min: f64 },
     FarFromPrediction { metres: f64, radians: f64 },
+    SeesThroughModel { ratio: f64, max: f64 },
 }
 
 impl std::fmt::Display for Rejection {
@@ -68,6 +79,12 @@ impl std::fmt::Display for Rejection {
             Self::IllConditioned { conditioning, min } => {
                 write!(f, "conditioning {conditioning:.1e} below {min:.1e}")
             }
+            Self::SeesThroughModel { ratio, max } => write!(
+                f,
+                "the frame sees through {:.0} % of the model in view (at most {:.0} %)",
+                ratio * 100.0,
+                max * 100.0
+            ),
             Self::FarFromPrediction { metres, radians } => write!(
                 f,
                 "{:.1} cm and {:.1}° from the motion prediction",
@@ -123,6 +140,18 @@ pub fn verify(
     Ok(())
 }
 
+/// Checks what the frame sees of the model at the registered pose.
+pub fn verify_visibility(seen: &Visibility, config: &VerifyConfig) -> Result<(), Rejection> {
+    let ratio = seen.violation_ratio();
+    if ratio > config.max_violation {
+        return Err(Rejection::SeesThroughModel {
+            ratio,
+            max: config.max_violation,
+        });
+    }
+    Ok(())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -158,6 +187,19 @@ mod tests {
         assert!(matches!(
             verify(&result(0.9, 0.008, 1e-9, Isometry3::identity()), None, &c),
             Err(Rejection::IllConditioned { .. })
+        ));
+        let clear = Visibility {
+            agree: 90,
+            violate: 10,
+        };
+        assert_eq!(verify_visibility(&clear, &c), Ok(()));
+        let through = Visibility {
+            agree: 50,
+            violate: 50,
+        };
+        assert!(matches!(
+            verify_visibility(&through, &c),
+            Err(Rejection::SeesThroughModel { .. })
         ));
     }
 
