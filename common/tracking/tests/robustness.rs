@@ -1,0 +1,160 @@
+//! Tracking on a room it was not tuned on (scene 3 of the suite): a 10 cm / 5° jump
+//! between frames is recovered, a frame from elsewhere is lost and grows nothing, and
+//! tracking relocalises when the camera comes back after ten lost frames.
+
+use opengs_datasets::synthetic::noise::quantize_depth;
+use opengs_datasets::synthetic::raycast::render;
+use opengs_datasets::synthetic::scene::Scene;
+use opengs_datasets::synthetic::scene_suite::room_with_loop;
+use opengs_geometry::nalgebra::{Isometry3, Vector3};
+use opengs_geometry::{Intrinsics, Pose};
+use opengs_tracking::{DepthFrame, FrameTracker, TrackOutcome, TrackStatus, TrackerConfig};
+
+const FPS: f64 = 30.0;
+const DEPTH_SCALE: f32 = 5000.0;
+
+struct Room {
+    scene: Scene,
+    path: Vec<Pose>,
+    k: Intrinsics,
+}
+
+fn room() -> Room {
+    let r = room_with_loop(3);
+    Room {
+        path: r.path.poses(200, FPS, 3),
+        scene: r.scene,
+        k: Intrinsics::new(525.0, 525.0, 319.5, 239.5, 640, 480),
+    }
+}
+
+impl Room {
+    fn depth_at(&self, pose: &Pose) -> Vec<u16> {
+        quantize_depth(&render(&self.scene, &self.k, pose).depth, DEPTH_SCALE)
+    }
+
+    /// Tracks the frame seen from `pose` at time `t`.
+    fn track(&self, tracker: &mut FrameTracker, pose: &Pose, t: f64) -> TrackOutcome {
+        let depth = self.depth_at(pose);
+        tracker.track(&DepthFrame {
+            depth: &depth,
+            depth_scale: DEPTH_SCALE as f64,
+            intrinsics: &self.k,
+            timestamp: t,
+        })
+    }
+}
+
+/// Position error (m) of `out` against `truth`, with the tracker started at the truth.
+fn error(out: &TrackOutcome, truth: &Pose) -> f64 {
+    (out.pose.translation.vector - truth.translation.vector).norm()
+}
+
+/// A tracker started at the path's first pose, run over its first `n` frames; and the
+/// last pose it verified.
+fn tracked(room: &Room, n: usize) -> (FrameTracker, Pose) {
+    let mut tracker = FrameTracker::new(TrackerConfig::tum());
+    tracker.set_first_pose(room.path[0]);
+    let mut last = room.path[0];
+    for (i, pose) in room.path[..n].iter().enumerate() {
+        let out = room.track(&mut tracker, pose, i as f64 / FPS);
+        assert!(out.status.has_pose(), "frame {i}: {:?}", out.failure);
+        assert!(
+            error(&out, pose) < 0.005,
+            "frame {i}: {:.2} cm",
+            error(&out, pose) * 100.0
+        );
+        last = out.pose;
+    }
+    (tracker, last)
+}
+
+#[test]
+fn a_ten_centimetre_five_degree_jump_between_frames_is_recovered() {
+    let room = room();
+    let n = 15;
+    for (axis, direction) in [
+        (Vector3::y(), Vector3::new(1.0, 0.0, 0.3)),
+        (Vector3::x(), Vector3::new(-0.3, 0.2, 1.0)),
+    ] {
+        let (mut tracker, _) = tracked(&room, n);
+        // The next frame, 10 cm and 5° away from where the path would be.
+        let jump = Isometry3::new(direction.normalize() * 0.10, axis * 5f64.to_radians());
+        let truth = room.path[n] * jump;
+        let out = room.track(&mut tracker, &truth, n as f64 / FPS);
+        assert_eq!(out.status, TrackStatus::Tracked, "{:?}", out.failure);
+        assert!(
+            error(&out, &truth) < 0.005,
+            "{:.2} cm off",
+            error(&out, &truth) * 100.0
+        );
+        assert!(out.wide_search.is_some(), "a jump takes the wide search");
+    }
+}
+
+#[test]
+fn a_frame_from_elsewhere_is_lost_adds_no_keyframe_and_the_next_is_tracked() {
+    let room = room();
+    let n = 20;
+    let (mut tracker, last) = tracked(&room, n);
+    let model = tracker.model_size();
+    // The camera turned 150° and moved 1.2 m within one frame: whatever registration
+    // returns, it must not be trusted.
+    let elsewhere = room.path[n] * Isometry3::new(Vector3::new(0.8, 0.0, -0.9), Vector3::y() * 2.6);
+    let lost = room.track(&mut tracker, &elsewhere, n as f64 / FPS);
+    assert_eq!(lost.status, TrackStatus::Lost, "{:?}", lost.failure);
+    assert!(lost.keyframe.is_none());
+    assert!(lost.failure.is_some());
+    // Reported at the last verified pose, not guessed.
+    assert_eq!(lost.pose, last);
+    assert_eq!(
+        tracker.model_size(),
+        model,
+        "a lost frame adds nothing to the model"
+    );
+    assert!(tracker.is_lost());
+    // Back on the path: relocalised from the last verified pose.
+    let back = room.track(&mut tracker, &room.path[n + 1], (n + 5) as f64 / FPS);
+    assert_eq!(back.status, TrackStatus::Relocalised, "{:?}", back.failure);
+    assert!(error(&back, &room.path[n + 1]) < 0.005);
+}
+
+#[test]
+fn tracking_relocalises_after_ten_lost_frames() {
+    let room = room();
+    let n = 30;
+    let (mut tracker, _) = tracked(&room, n);
+    // Ten frames looking straight at the ceiling from elsewhere: lost, none guessed.
+    let away = room.path[n] * Isometry3::new(Vector3::new(0.0, -0.5, 0.0), Vector3::x() * 1.4);
+    let mut t = n as f64 / FPS;
+    for _ in 0..10 {
+        t += 1.0 / FPS;
+        let out = room.track(&mut tracker, &away, t);
+        assert!(!out.status.has_pose(), "{:?}", out.status);
+        assert!(out.keyframe.is_none());
+    }
+    // The camera comes back 12 frames further along the path: within a few frames (one
+    // guess every 0.15 s) a guess verifies.
+    let mut relocalised = None;
+    for (k, truth) in room.path[n + 12..n + 24].iter().enumerate() {
+        t += 1.0 / FPS;
+        let out = room.track(&mut tracker, truth, t);
+        if out.status == TrackStatus::Relocalised {
+            relocalised = Some((k, error(&out, truth)));
+            break;
+        }
+        assert_eq!(
+            out.status,
+            TrackStatus::Lost,
+            "frame {k}: {:?}",
+            out.failure
+        );
+    }
+    let (after, err) = relocalised.expect("relocalised within 12 frames");
+    assert!(
+        err < 0.005,
+        "{:.2} cm off after {after} frames",
+        err * 100.0
+    );
+    assert!(!tracker.is_lost());
+}
