@@ -25,14 +25,16 @@ pub struct DensifyInput<'a> {
 /// Where the map leaves a keyframe open (SplaTAM's densification): rendered at the
 /// keyframe, a pixel with valid depth is a hole when it accumulates α below
 /// `max_silhouette`, or when the map's surface there lies behind the observed one by more
-/// than `max(min_depth_error, depth_error_fraction × z)` (something new in front).
+/// than `max(min_depth_error, median_factor × the median depth error)` over the covered
+/// samples (SplaTAM's rule: something new in front; the median keeps the blend of
+/// foreground and background at object edges from counting).
 #[derive(Debug, Clone, PartialEq)]
 pub struct HoleFilling {
     /// Depth samples are taken every this many pixels (the tracker's stride).
     pub stride: usize,
     pub max_silhouette: f32,
     pub min_depth_error: f32,
-    pub depth_error_fraction: f32,
+    pub median_factor: f32,
     /// Depth beyond this (m) is not mapped.
     pub max_depth: f64,
 }
@@ -43,7 +45,7 @@ impl Default for HoleFilling {
             stride: 5,
             max_silhouette: 0.5,
             min_depth_error: 0.05,
-            depth_error_fraction: 0.05,
+            median_factor: 50.0,
             max_depth: 10.0,
         }
     }
@@ -166,18 +168,41 @@ pub fn gaussians_for_holes(
     let (rw, rh) = (camera.width() as usize, camera.height() as usize);
     let (sx, sy) = (rw as f64 / k.width as f64, rh as f64 / k.height as f64);
     let rotation = input.pose.rotation.to_rotation_matrix().into_inner();
+    let render_index = |&(u, v): &(u32, u32)| {
+        let ru = ((u as f64 * sx) as usize).min(rw - 1);
+        let rv = ((v as f64 * sy) as usize).min(rh - 1);
+        rv * rw + ru
+    };
+    // Rendered minus observed depth where the map covers the sample.
+    let errors: Vec<Option<f32>> = samples
+        .points
+        .iter()
+        .zip(&samples.pixels)
+        .map(|(p, px)| {
+            let i = render_index(px);
+            let alpha = out.silhouette[i];
+            (alpha >= holes.max_silhouette).then(|| out.depth[i] / alpha - p.z as f32)
+        })
+        .collect();
+    let mut magnitudes: Vec<f32> = errors.iter().flatten().map(|e| e.abs()).collect();
+    let median = if magnitudes.is_empty() {
+        0.0
+    } else {
+        let mid = magnitudes.len() / 2;
+        *magnitudes.select_nth_unstable_by(mid, f32::total_cmp).1
+    };
+    let too_far = holes.min_depth_error.max(holes.median_factor * median);
     let mut new = Vec::new();
-    for ((p, &(u, v)), cov) in samples.points.iter().zip(&samples.pixels).zip(&covariances) {
-        let (ru, rv) = (
-            ((u as f64 * sx) as usize).min(rw - 1),
-            ((v as f64 * sy) as usize).min(rh - 1),
-        );
-        let i = rv * rw + ru;
-        let alpha = out.silhouette[i];
-        let z = p.z as f32;
-        let open = alpha < holes.max_silhouette || {
-            let rendered_z = out.depth[i] / alpha;
-            rendered_z - z > holes.min_depth_error.max(holes.depth_error_fraction * z)
+    for (((p, &(u, v)), cov), error) in samples
+        .points
+        .iter()
+        .zip(&samples.pixels)
+        .zip(&covariances)
+        .zip(&errors)
+    {
+        let open = match error {
+            None => true,
+            Some(e) => *e > too_far,
         };
         if !open {
             continue;
@@ -327,17 +352,22 @@ mod tests {
         let mut map = GaussianMap::new();
         all.iter().for_each(|g| map.push(*g));
         assert!(gaussians_for_holes(&input, &map, &camera, &holes, 0.9, 0.7).is_empty());
-        // The same wall mapped 1 m too far (3 m): the observed surface is 1 m in front of
-        // the map's, more than max(5 cm, 5 % of 2 m): all open again.
+        // The left three sample columns (x < −0.4 m) mapped 1 m too far (3 m): the frame
+        // sees a surface 1 m in front of the map's there, far beyond 50 × the median error
+        // (0 on the rest): those 18 samples open (the column beside the right part blends
+        // with it and may not), the others not.
         let mut far = GaussianMap::new();
         for g in &all {
             let mut moved = *g;
-            moved.mean = [g.mean[0] * 1.5, g.mean[1] * 1.5, 3.0];
-            moved.log_scale = g.log_scale.map(|l| l + 1.5f32.ln());
+            if g.mean[0] < -0.4 {
+                moved.mean = [g.mean[0] * 1.5, g.mean[1] * 1.5, 3.0];
+                moved.log_scale = g.log_scale.map(|l| l + 1.5f32.ln());
+            }
             far.push(moved);
         }
         let in_front = gaussians_for_holes(&input, &far, &camera, &holes, 0.9, 0.7);
-        assert_eq!(in_front.len(), 48);
+        assert!((15..=18).contains(&in_front.len()), "{}", in_front.len());
+        assert!(in_front.iter().all(|g| g.mean[0] < -0.4));
         // Only the right half mapped (u ≥ 20): the left half's samples (u < 20: 4 of 8
         // columns, 24 samples) open, and at most the column at its edge.
         let mut half = GaussianMap::new();
