@@ -8,14 +8,15 @@
 //! ```
 //!
 //! Tracking: the fine registration from the constant-velocity prediction;
-//! after a gap of a quarter second (or when that fails),
-//! coarse-to-fine registration from the prediction and from the last verified
-//! pose, the better kept. Every result is verified against fitness,
-//! residual, conditioning, the motion prior and what the frame sees of the
-//! model (nothing in front of the measured depth). A frame that fails is lost:
-//! it is reported with the last verified pose and status `Lost`, makes no
-//! keyframe and adds nothing to the model. While lost, each frame tries a few
-//! relocalisation guesses ([`crate::Relocaliser`]) until one verifies.
+//! after a gap of a quarter second (or when that fails, or slides more than
+//! 2.5 cm from the prediction), coarse-to-fine registration from the
+//! prediction and from the last verified pose, the best polished by fine
+//! restarts around it. Every result is verified against fitness, residual,
+//! conditioning, the motion prior and what the frame sees of the model
+//! (nothing in front of the measured depth). A frame that fails is lost: it
+//! is reported with the last verified pose and status `Lost`, makes no
+//! keyframe and adds nothing to the model. While lost, a relocalisation guess
+//! ([`crate::Relocaliser`]) is tried every 0.15 s until one verifies.
 
 use opengs_geometry::{Intrinsics, Pose};
 use opengs_gicp::{

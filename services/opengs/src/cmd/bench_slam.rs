@@ -478,7 +478,12 @@ fn lost_after(run_dir: &Path, data: &Path, at: usize) -> anyhow::Result<(usize, 
     };
     let verified = stamps(&run_dir.join("trajectory.txt"))?;
     let first_verified = verified.iter().copied().find(|&t| t >= t_at - 1e-4);
-    let lost = stamps(&run_dir.join(opengs_pipeline::recorder::LOST_FRAMES))?;
+    // Builds from before lost frames were reported write no lost.txt: none were reported.
+    let lost_path = run_dir.join(opengs_pipeline::recorder::LOST_FRAMES);
+    let lost = match lost_path.exists() {
+        true => stamps(&lost_path)?,
+        false => Vec::new(),
+    };
     let lost_until = |end: f64| {
         lost.iter()
             .filter(|&&t| t >= t_at - 1e-4 && t < end)
