@@ -227,6 +227,11 @@ mod tests {
         )
         .expect("registers");
         let b = register(&source, target.fine(), &Isometry3::identity(), &fine).expect("ok");
-        assert_eq!(a, b);
+        // The parallel sums may add in another order: equal up to rounding.
+        assert_eq!((a.iterations, a.inliers), (b.iterations, b.inliers));
+        let diff = (a.transform.to_homogeneous() - b.transform.to_homogeneous())
+            .abs()
+            .max();
+        assert!(diff < 1e-9, "{a:?} vs {b:?}");
     }
 }
