@@ -17,7 +17,7 @@ pub use config::TrackerConfig;
 pub use frame_tracker::{
     DepthFrame, FrameTracker, KeyframeKind, TrackOutcome, TrackStatus, WorldKeyframeCloud,
 };
-pub use model::{MapGaussians, ModelBuilder, ModelUpdate, TrackingModel};
+pub use model::{MapGaussians, ModelUpdate, TrackingModel};
 pub use motion::ConstantVelocity;
 pub use relocalise::{RelocaliseConfig, Relocaliser};
 pub use verify::{verify, verify_visibility, MotionPrior, Rejection, VerifyConfig};
