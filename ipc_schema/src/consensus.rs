@@ -11,8 +11,7 @@ use crate::{MessageKind, SchemaError, Stamp};
 pub const MAX_CONSENSUS_ENTRIES: u32 = 1 << 20;
 
 /// A label change over a set of pixels: `from` → `to` for pixels
-/// `pixels[offset .. offset + count]`. For prune runs `from` is the label ℓr whose counter
-/// Gaussians are looked for there, and `to` carries θ (metres, `f32::to_bits`).
+/// `pixels[offset .. offset + count]`.
 #[derive(Debug, Clone, Copy, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
 #[repr(C)]
 pub struct PixelRun {
@@ -22,9 +21,19 @@ pub struct PixelRun {
     pub count: u32,
 }
 
+/// A counter-pruning region (METHOD §5.3): Gaussians labelled `label` (ℓr) in the top-K of
+/// pixels `pixels[offset .. offset + count]` are pruned when larger than the header's θ.
+#[derive(Debug, Clone, Copy, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+#[repr(C)]
+pub struct PruneRun {
+    pub label: u32,
+    pub offset: u32,
+    pub count: u32,
+}
+
 /// Consensus result for one keyframe, for the mapper.
 /// Payload: consistent label map `u32[W·H]` | mapping `[u32; 2][mapping_count]` (ℓs → ℓt) |
-/// relabel runs [`PixelRun`]`[relabel_count]` | prune runs [`PixelRun`]`[prune_count]` |
+/// relabel runs [`PixelRun`]`[relabel_count]` | prune runs [`PruneRun`]`[prune_count]` |
 /// pixel indices `u32[pixel_count]`.
 #[derive(Debug, Clone, Copy, Default, ZeroCopySend)]
 #[type_name("opengs::ConsensusHeader")]
@@ -37,6 +46,9 @@ pub struct ConsensusHeader {
     pub relabel_count: u32,
     pub prune_count: u32,
     pub pixel_count: u32,
+    /// θ (metres): counter Gaussians are pruned when their largest scale exceeds it.
+    pub counter_prune_scale: f32,
+    pub _reserved: u32,
 }
 
 /// Borrowed parts of a consensus result (encode side and decoded view alike).
@@ -45,7 +57,7 @@ pub struct ConsensusResult<'a> {
     pub label_map: &'a [u32],
     pub mapping: &'a [[u32; 2]],
     pub relabels: &'a [PixelRun],
-    pub prunes: &'a [PixelRun],
+    pub prunes: &'a [PruneRun],
     pub pixels: &'a [u32],
 }
 
@@ -56,7 +68,13 @@ pub struct ConsensusView<'a> {
 }
 
 impl ConsensusHeader {
-    pub fn new(mut stamp: Stamp, width: u32, height: u32, parts: &ConsensusResult) -> Self {
+    pub fn new(
+        mut stamp: Stamp,
+        width: u32,
+        height: u32,
+        counter_prune_scale: f32,
+        parts: &ConsensusResult,
+    ) -> Self {
         stamp.kind = MessageKind::Consensus as u32;
         let mut h = Self {
             stamp,
@@ -66,6 +84,8 @@ impl ConsensusHeader {
             relabel_count: parts.relabels.len() as u32,
             prune_count: parts.prunes.len() as u32,
             pixel_count: parts.pixels.len() as u32,
+            counter_prune_scale,
+            _reserved: 0,
         };
         h.stamp.payload_len = h.layout_len() as u64;
         h
@@ -75,7 +95,7 @@ impl ConsensusHeader {
         section_len::<u32>(self.width as usize * self.height as usize)
             + section_len::<[u32; 2]>(self.mapping_count as usize)
             + section_len::<PixelRun>(self.relabel_count as usize)
-            + section_len::<PixelRun>(self.prune_count as usize)
+            + section_len::<PruneRun>(self.prune_count as usize)
             + section_len::<u32>(self.pixel_count as usize)
     }
 
@@ -85,6 +105,12 @@ impl ConsensusHeader {
 
     fn counts(&self) -> Result<[usize; 5], SchemaError> {
         let n = check_dims(self.width, self.height)?;
+        let theta = self.counter_prune_scale;
+        if !(theta.is_finite() && theta > 0.0) {
+            return Err(SchemaError::Invalid(
+                "counter_prune_scale (θ) must be a finite length > 0",
+            ));
+        }
         Ok([
             n,
             check_count("mapping_count", self.mapping_count, MAX_CONSENSUS_ENTRIES)?,
@@ -144,8 +170,10 @@ impl ConsensusHeader {
 /// Every run must index inside the pixel list, and every pixel inside the image.
 fn check_runs(parts: &ConsensusResult, n: usize) -> Result<(), SchemaError> {
     let total = parts.pixels.len() as u64;
-    for run in parts.relabels.iter().chain(parts.prunes) {
-        if run.offset as u64 + run.count as u64 > total {
+    let relabels = parts.relabels.iter().map(|r| (r.offset, r.count));
+    let prunes = parts.prunes.iter().map(|r| (r.offset, r.count));
+    for (offset, count) in relabels.chain(prunes) {
+        if offset as u64 + count as u64 > total {
             return Err(SchemaError::Invalid("pixel run outside the pixel list"));
         }
     }

@@ -22,7 +22,7 @@ mod services;
 mod stamp;
 mod telemetry;
 
-pub use consensus::{ConsensusHeader, ConsensusResult, ConsensusView, PixelRun};
+pub use consensus::{ConsensusHeader, ConsensusResult, ConsensusView, PixelRun, PruneRun};
 pub use control::{ControlCommand, ControlHeader, ControlRequest, ControlView};
 pub use error::SchemaError;
 pub use frame::{FrameHeader, FrameParts, FrameView};

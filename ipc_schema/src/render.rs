@@ -19,8 +19,6 @@ pub struct LabelCompleteness {
     pub visible: u32,
     /// Gaussians with this label in the whole map.
     pub total: u32,
-    /// Map confidence of the label.
-    pub confidence: f32,
 }
 
 /// The mapper's GS Voting render at a keyframe pose (top-K stays in the mapper).

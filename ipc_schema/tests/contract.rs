@@ -288,7 +288,6 @@ fn render_round_trip_and_rejects() {
         label: 5,
         visible: 10,
         total: 20,
-        confidence: 0.8,
     }];
     let hdr = RenderHeader::new(stamp(), 3, 2, 1);
     let mut buf = buffer(hdr.payload_len());
@@ -303,7 +302,6 @@ fn render_round_trip_and_rejects() {
         label: 5,
         visible: 30,
         total: 20,
-        confidence: 0.8,
     }];
     hdr.encode(&map, &bad_labels, as_uninit_mut(payload))
         .expect("encode");
@@ -323,9 +321,8 @@ fn consensus_round_trip_and_rejects() {
         offset: 0,
         count: 2,
     }];
-    let prunes = [PixelRun {
-        from: 1,
-        to: 0,
+    let prunes = [PruneRun {
+        label: 1,
         offset: 2,
         count: 1,
     }];
@@ -337,11 +334,12 @@ fn consensus_round_trip_and_rejects() {
         prunes: &prunes,
         pixels: &pixels,
     };
-    let hdr = ConsensusHeader::new(stamp(), 3, 2, &parts);
+    let hdr = ConsensusHeader::new(stamp(), 3, 2, 0.1, &parts);
     let mut buf = buffer(hdr.payload_len());
     let payload = bytes(&mut buf, hdr.payload_len());
     hdr.encode(&parts, as_uninit_mut(payload)).expect("encode");
     let v = hdr.decode(payload).expect("decode");
+    assert_eq!(v.header.counter_prune_scale, 0.1);
     assert_eq!(v.result.mapping, &mapping[..]);
     assert_eq!(v.result.relabels, &relabels[..]);
     assert_eq!(v.result.prunes, &prunes[..]);
@@ -370,6 +368,15 @@ fn consensus_round_trip_and_rejects() {
     let mut h2 = hdr;
     h2.mapping_count = 3;
     assert!(h2.decode(payload).is_err());
+    // θ must be a length.
+    for theta in [0.0, -0.1, f32::NAN, f32::INFINITY] {
+        let mut h3 = hdr;
+        h3.counter_prune_scale = theta;
+        assert!(
+            matches!(h3.decode(payload), Err(SchemaError::Invalid(_))),
+            "θ = {theta}"
+        );
+    }
 }
 
 #[test]
@@ -466,4 +473,43 @@ fn misaligned_payload_rejected() {
     .expect("encode");
     let shifted = &all[1..1 + hdr.payload_len()];
     assert_eq!(hdr.decode(shifted).err(), Some(SchemaError::Alignment(8)));
+}
+
+#[test]
+fn consensus_with_many_runs_fills_its_payload() {
+    let label_map = vec![0u32; 640 * 480];
+    let mapping: Vec<[u32; 2]> = (0..14).map(|i| [i, i + 1]).collect();
+    let pixels: Vec<u32> = (0..1001).collect();
+    for (r, p) in [(0usize, 0usize), (1, 1), (3, 2), (2, 3), (5, 5)] {
+        let relabels: Vec<PixelRun> = (0..r)
+            .map(|i| PixelRun {
+                from: 1,
+                to: 2,
+                offset: i as u32,
+                count: 1,
+            })
+            .collect();
+        let prunes: Vec<PruneRun> = (0..p)
+            .map(|i| PruneRun {
+                label: 1,
+                offset: i as u32,
+                count: 3,
+            })
+            .collect();
+        let parts = ConsensusResult {
+            label_map: &label_map,
+            mapping: &mapping,
+            relabels: &relabels,
+            prunes: &prunes,
+            pixels: &pixels,
+        };
+        let hdr = ConsensusHeader::new(stamp(), 640, 480, 0.1, &parts);
+        let mut buf = buffer(hdr.payload_len());
+        let payload = bytes(&mut buf, hdr.payload_len());
+        hdr.encode(&parts, as_uninit_mut(payload))
+            .unwrap_or_else(|e| panic!("{r} relabels, {p} prunes: {e}"));
+        let v = hdr.decode(payload).expect("decode");
+        assert_eq!(v.result.prunes, &prunes[..]);
+        assert_eq!(v.result.relabels, &relabels[..]);
+    }
 }

@@ -2,6 +2,7 @@
 
 pub mod ate;
 pub mod label_png;
+pub mod run_dir;
 pub mod segmentation;
 pub mod trajectory;
 
@@ -10,6 +11,7 @@ pub use ate::{
     DEFAULT_MAX_TIME_DIFFERENCE,
 };
 pub use label_png::{read_label_png, write_label_png};
+pub use run_dir::RunDir;
 pub use segmentation::{InstanceScore, LabelConfusion, SegmentationScore};
 pub use trajectory::{
     format_tum_trajectory, parse_tum_trajectory, read_tum_trajectory, write_tum_trajectory,

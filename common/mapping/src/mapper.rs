@@ -2,12 +2,15 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
 use opengs_splat::{
-    prune, train_step, Adam, AdamConfig, Camera, GaussianMap, Rendered, StepStats, TrainConfig,
+    prune, train_step, Adam, AdamConfig, Camera, GaussianMap, StepStats, TrainConfig,
     TrainWorkspace,
 };
 
 use crate::densify::{gaussians_for_holes, gaussians_from_points, DensifyInput};
-use crate::semantic::PendingRenders;
+use crate::semantic::{
+    ConsensusApplied, ConsensusApplyError, ConsensusUpdate, KeyframeRender, PendingRenders,
+    SemanticLoop,
+};
 use crate::{MapperConfig, StoredKeyframe};
 
 /// The trackable Gaussians (opacity above the threshold) in the tracker's terms.
@@ -20,17 +23,13 @@ pub struct TrackableGaussians {
     pub scales: Vec<[f32; 3]>,
 }
 
-/// Owns the map, its optimiser state and the keyframes it optimises against.
+/// Owns the map, its optimiser state, the keyframes it optimises against and its side of the
+/// semantic loop.
 pub struct Mapper {
     config: MapperConfig,
-    pub(crate) map: GaussianMap,
-    pub(crate) adam: Adam,
-    /// Semantic renders waiting for their consensus (their top-K ids follow every prune).
-    pub(crate) pending: PendingRenders,
-    /// Buffers of the last semantic render, reused by the next (a fresh 640×480 render
-    /// faults in ~50 MB: 46 ms against 33 ms reused); its top-K comes back from the
-    /// consensus that used it.
-    pub(crate) semantic_buffers: Rendered,
+    map: GaussianMap,
+    adam: Adam,
+    semantic: SemanticLoop,
     keyframes: Vec<StoredKeyframe>,
     workspace: TrainWorkspace,
     rng: ChaCha8Rng,
@@ -52,8 +51,7 @@ impl Mapper {
             config,
             map,
             adam,
-            pending: PendingRenders::default(),
-            semantic_buffers: Rendered::default(),
+            semantic: SemanticLoop::default(),
             keyframes: Vec::new(),
             workspace: TrainWorkspace::new(),
             rng,
@@ -145,7 +143,7 @@ impl Mapper {
         self.iterations += 1;
         if self.iterations.is_multiple_of(self.config.prune_every) {
             let old_to_new = prune(&mut self.map, Some(&mut self.adam), &self.config.prune);
-            self.pending.remap(&old_to_new);
+            self.semantic.remap(&old_to_new);
         }
         Some(stats)
     }
@@ -161,5 +159,27 @@ impl Mapper {
             }
         }
         t
+    }
+
+    /// GS Voting render with top-K (K = `k`) and per-label visibility at `camera` (full
+    /// resolution); kept for [`Mapper::apply_consensus`] of keyframe `seq`.
+    pub fn render_for_consensus(&mut self, seq: u64, camera: &Camera, k: usize) -> &KeyframeRender {
+        self.semantic
+            .render_for_consensus(&self.map, seq, camera, k)
+    }
+
+    /// Renders waiting for their consensus.
+    pub fn pending_renders(&self) -> &PendingRenders {
+        self.semantic.pending()
+    }
+
+    /// Applies one keyframe's consensus through the top-K kept from its render. On error the
+    /// map is unchanged.
+    pub fn apply_consensus(
+        &mut self,
+        update: &ConsensusUpdate,
+    ) -> Result<ConsensusApplied, ConsensusApplyError> {
+        self.semantic
+            .apply_consensus(&mut self.map, &mut self.adam, update)
     }
 }

@@ -1,5 +1,7 @@
-//! The mapper's side of the semantic loop: a GS Voting render at a keyframe pose for the
-//! consensus, and the consensus result applied to the map (METHOD §3–§5).
+//! The mapper's side of the semantic loop ([`SemanticLoop`]): a GS Voting render at a keyframe
+//! pose for the consensus, kept with its G_topK until the consensus result comes back, and
+//! that result applied to the map (METHOD §3–§5). It owns only the renders; the map and the
+//! optimiser state it changes are passed in by the [`crate::Mapper`] that holds it.
 //!
 //! Decisions where METHOD.md is open:
 //! - Unlabelled (label 0) Gaussians whose centre projects onto a labelled pixel of the
@@ -17,10 +19,7 @@ use opengs_semantics::{
     apply_relabels, select_counter_gaussians, validate_regions, CounterPruneRegion,
     RelabelInstruction,
 };
-use opengs_splat::{render_into, Camera, RenderRequest};
-
-use crate::mapper::Mapper;
-use crate::pixel_top_k::PixelTopK;
+use opengs_splat::{render_into, Adam, Camera, GaussianMap, RenderRequest, Rendered, TopK};
 
 /// Renders kept at most while their consensus is outstanding (the segmenter works on the
 /// newest keyframe only, so more would be stale).
@@ -51,7 +50,7 @@ pub struct KeyframeRender {
     pub label_map: Vec<u32>,
     /// Rendered surface depth D/S (0 where nothing was rendered).
     pub surface_depth: Vec<f32>,
-    pub top_k: PixelTopK,
+    pub top_k: TopK,
     /// Every non-zero label of the map, visible or not.
     pub visibility: Vec<LabelVisibility>,
 }
@@ -109,12 +108,13 @@ impl PendingRenders {
         self.0.is_empty()
     }
 
-    fn push(&mut self, r: KeyframeRender) {
+    fn push(&mut self, r: KeyframeRender) -> &KeyframeRender {
         self.0.retain(|old| old.seq != r.seq);
         while self.0.len() >= MAX_PENDING_RENDERS {
             self.0.pop_front();
         }
         self.0.push_back(r);
+        &self.0[self.0.len() - 1]
     }
 
     fn take(&mut self, seq: u64) -> Option<KeyframeRender> {
@@ -123,19 +123,36 @@ impl PendingRenders {
     }
 
     /// Keeps the kept top-K ids valid after the map was compacted.
-    pub fn remap(&mut self, old_to_new: &[Option<u32>]) {
+    fn remap(&mut self, old_to_new: &[Option<u32>]) {
         for r in &mut self.0 {
             r.top_k.remap(old_to_new);
         }
     }
 }
 
-impl Mapper {
-    /// GS Voting render with top-K (K = `k`) and per-label visibility at `camera` (full
-    /// resolution); kept for [`Mapper::apply_consensus`] of keyframe `seq`.
-    pub fn render_for_consensus(&mut self, seq: u64, camera: &Camera, k: usize) -> &KeyframeRender {
-        let r = &mut self.semantic_buffers;
-        render_into(&self.map, camera, &RenderRequest::semantic(k), r);
+/// The renders sent to the consensus and not yet answered, and the buffers they reuse.
+#[derive(Default)]
+pub struct SemanticLoop {
+    /// Renders waiting for their consensus (their top-K ids follow every prune).
+    pending: PendingRenders,
+    /// Buffers of the last semantic render, reused by the next (a fresh 640×480 render faults
+    /// in ~50 MB: 46 ms against 33 ms reused); its top-K comes back from the consensus that
+    /// used it.
+    buffers: Rendered,
+}
+
+impl SemanticLoop {
+    /// GS Voting render of `map` with top-K (K = `k`) and per-label visibility at `camera`
+    /// (full resolution); kept for [`SemanticLoop::apply_consensus`] of keyframe `seq`.
+    pub fn render_for_consensus(
+        &mut self,
+        map: &GaussianMap,
+        seq: u64,
+        camera: &Camera,
+        k: usize,
+    ) -> &KeyframeRender {
+        let r = &mut self.buffers;
+        render_into(map, camera, &RenderRequest::semantic(k), r);
         let out = &mut r.output;
         let label_map = out.labels.take().unwrap_or_default();
         let surface_depth = out
@@ -144,13 +161,9 @@ impl Mapper {
             .zip(&out.silhouette)
             .map(|(&d, &s)| if s > MIN_SILHOUETTE { d / s } else { 0.0 })
             .collect();
-        let top_k = out
-            .top_k
-            .take()
-            .map(PixelTopK::from_render)
-            .unwrap_or_default();
+        let top_k = out.top_k.take().unwrap_or_default();
         let visible = out.visible_per_label.take().unwrap_or_default();
-        let visibility = label_visibility(&self.map.count_per_label(), &visible);
+        let visibility = label_visibility(&map.count_per_label(), &visible);
         self.pending.push(KeyframeRender {
             seq,
             camera: *camera,
@@ -158,19 +171,25 @@ impl Mapper {
             surface_depth,
             top_k,
             visibility,
-        });
-        self.pending.0.back().expect("just pushed")
+        })
     }
 
     /// Renders waiting for their consensus.
-    pub fn pending_renders(&self) -> &PendingRenders {
+    pub fn pending(&self) -> &PendingRenders {
         &self.pending
     }
 
-    /// Applies one keyframe's consensus through the top-K kept from its render. On error the
-    /// map is unchanged.
+    /// Keeps the pending renders' top-K ids valid after `map` was compacted.
+    pub fn remap(&mut self, old_to_new: &[Option<u32>]) {
+        self.pending.remap(old_to_new);
+    }
+
+    /// Applies one keyframe's consensus to `map` through the top-K kept from its render; the
+    /// optimiser state `adam` loses the pruned Gaussians with it. On error nothing changed.
     pub fn apply_consensus(
         &mut self,
+        map: &mut GaussianMap,
+        adam: &mut Adam,
         update: &ConsensusUpdate,
     ) -> Result<ConsensusApplied, ConsensusApplyError> {
         let seq = update.seq;
@@ -190,38 +209,40 @@ impl Mapper {
         // Check the counter regions before the relabels change anything.
         validate_regions(
             &render.top_k,
-            self.map.len(),
+            map.len(),
             update.counter_regions.iter().map(|r| r.pixels.as_slice()),
         )
         .map_err(invalid)?;
-        let relabelled = apply_relabels(&render.top_k, &mut self.map.labels, update.relabels)
-            .map_err(invalid)?;
-        let map = &self.map;
-        let counters = select_counter_gaussians(
-            &render.top_k,
-            &map.labels,
-            |i| {
-                let s = map.scale(i);
-                s[0].max(s[1]).max(s[2])
-            },
-            update.counter_prune_scale,
-            update.counter_regions,
-        )
-        .map_err(invalid)?;
-        let labelled = self.label_unlabelled(&render, update.consistent_label_map);
+        let relabelled =
+            apply_relabels(&render.top_k, &mut map.labels, update.relabels).map_err(invalid)?;
+        let counters = {
+            let map = &*map;
+            select_counter_gaussians(
+                &render.top_k,
+                &map.labels,
+                |i| {
+                    let s = map.scale(i);
+                    s[0].max(s[1]).max(s[2])
+                },
+                update.counter_prune_scale,
+                update.counter_regions,
+            )
+            .map_err(invalid)?
+        };
+        let labelled = label_unlabelled(map, &render, update.consistent_label_map);
         if !counters.is_empty() {
-            let mut remove = vec![false; self.map.len()];
+            let mut remove = vec![false; map.len()];
             for &i in &counters {
                 remove[i as usize] = true;
             }
-            let old_to_new = self.map.remove_where(&remove);
-            self.adam.compact(&old_to_new);
+            let old_to_new = map.remove_where(&remove);
+            adam.compact(&old_to_new);
             self.pending.remap(&old_to_new);
         }
         // Its top-K buffers serve the next semantic render.
-        let spare = &mut self.semantic_buffers.output.top_k;
+        let spare = &mut self.buffers.output.top_k;
         if spare.is_none() {
-            *spare = Some(render.top_k.into_render());
+            *spare = Some(render.top_k);
         }
         Ok(ConsensusApplied {
             relabelled,
@@ -229,42 +250,42 @@ impl Mapper {
             pruned: counters.len(),
         })
     }
+}
 
-    /// Label-0 Gaussians on the rendered surface of a labelled pixel take its label.
-    fn label_unlabelled(&mut self, render: &KeyframeRender, labels: &[u32]) -> usize {
-        let cam = &render.camera;
-        let k = cam.intrinsics;
-        let (w, h) = (k.width as f32, k.height as f32);
-        let mut labelled = 0;
-        for i in 0..self.map.len() {
-            if self.map.labels[i] != 0 {
-                continue;
-            }
-            let [x, y, z] = cam.to_camera(self.map.means[i]);
-            if z <= cam.near {
-                continue;
-            }
-            let u = (k.fx as f32 * x / z + k.cx as f32).round();
-            let v = (k.fy as f32 * y / z + k.cy as f32).round();
-            if !(u >= 0.0 && v >= 0.0 && u < w && v < h) {
-                continue;
-            }
-            let p = v as usize * k.width as usize + u as usize;
-            if labels[p] == 0 {
-                continue;
-            }
-            // Visible at its centre: a real share of the pixel's weight, or on the rendered
-            // surface (D/S blends depths, so it only catches what the top-K lacks).
-            let surface = render.surface_depth[p];
-            let on_surface = surface > 0.0 && (z - surface).abs() <= 0.05 + 0.05 * surface;
-            let weight = render.top_k.weight_of(p, i as u32).unwrap_or(0.0);
-            if on_surface || weight >= MIN_LABEL_WEIGHT {
-                self.map.labels[i] = labels[p];
-                labelled += 1;
-            }
+/// Label-0 Gaussians on the rendered surface of a labelled pixel take its label.
+fn label_unlabelled(map: &mut GaussianMap, render: &KeyframeRender, labels: &[u32]) -> usize {
+    let cam = &render.camera;
+    let k = cam.intrinsics;
+    let (w, h) = (k.width as f32, k.height as f32);
+    let mut labelled = 0;
+    for i in 0..map.len() {
+        if map.labels[i] != 0 {
+            continue;
         }
-        labelled
+        let [x, y, z] = cam.to_camera(map.means[i]);
+        if z <= cam.near {
+            continue;
+        }
+        let u = (k.fx as f32 * x / z + k.cx as f32).round();
+        let v = (k.fy as f32 * y / z + k.cy as f32).round();
+        if !(u >= 0.0 && v >= 0.0 && u < w && v < h) {
+            continue;
+        }
+        let p = v as usize * k.width as usize + u as usize;
+        if labels[p] == 0 {
+            continue;
+        }
+        // Visible at its centre: a real share of the pixel's weight, or on the rendered
+        // surface (D/S blends depths, so it only catches what the top-K lacks).
+        let surface = render.surface_depth[p];
+        let on_surface = surface > 0.0 && (z - surface).abs() <= 0.05 + 0.05 * surface;
+        let weight = render.top_k.weight_of(p, i as u32).unwrap_or(0.0);
+        if on_surface || weight >= MIN_LABEL_WEIGHT {
+            map.labels[i] = labels[p];
+            labelled += 1;
+        }
     }
+    labelled
 }
 
 /// Visible and total counts of every non-zero label in the map.

@@ -7,10 +7,11 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use opengs_datasets::DatasetKind;
+use opengs_eval::RunDir;
 use opengs_ipc_schema::service::{CONSENSUS, RENDERS, SEGMENTS};
 use opengs_ipc_schema::{
-    now_ns, ConsensusHeader, ConsensusResult, MessageKind, PixelRun, RenderHeader, SegmentsHeader,
-    Stamp,
+    now_ns, ConsensusHeader, ConsensusResult, MessageKind, PixelRun, PruneRun, RenderHeader,
+    SegmentsHeader, Stamp,
 };
 use opengs_runtime::{
     waitset, CallbackProgression, Inlet, Outlet, RunContext, TelemetrySink, WaitSetRunResult,
@@ -57,12 +58,29 @@ impl Ablation {
     }
 }
 
-/// Options of the consensus stage.
-#[derive(clap::Args, Debug, Clone)]
-pub struct ConsensusArgs {
+/// The consensus's flags that `opengs run` sets ([`crate::run::StageFlags`]); one struct for
+/// parsing and for writing them.
+#[derive(clap::Args, Debug, Clone, Default, PartialEq)]
+pub struct ConsensusRunFlags {
     /// Switch a module off (repeatable).
     #[arg(long, value_enum)]
     pub ablation: Vec<Ablation>,
+}
+
+impl ConsensusRunFlags {
+    pub fn to_args(&self) -> Vec<String> {
+        self.ablation
+            .iter()
+            .flat_map(|a| ["--ablation".to_string(), a.as_str().to_string()])
+            .collect()
+    }
+}
+
+/// Options of the consensus stage.
+#[derive(clap::Args, Debug, Clone)]
+pub struct ConsensusArgs {
+    #[command(flatten)]
+    pub run: ConsensusRunFlags,
     /// θ (m): counter Gaussians larger than this are pruned. Default: 0.25 for TUM, 0.10
     /// otherwise (METHOD §5.3).
     #[arg(long)]
@@ -85,19 +103,13 @@ impl ConsensusArgs {
             counter_prune_scale: theta,
             ..ConsensusConfig::default()
         };
-        for a in &self.ablation {
+        for a in &self.run.ablation {
             a.apply(&mut config);
         }
         config.validate()?;
         Ok(config)
     }
 }
-
-/// Where the segmenter's label maps are saved, one PNG per keyframe.
-const SEGMENTS_DIR: &str = "segments";
-
-/// File the table is kept in, beside the run's other outputs.
-pub const LABEL_TABLE: &str = "label_table.json";
 
 /// Owned copy of one segments message.
 struct OwnedSegments {
@@ -162,9 +174,8 @@ impl ConsensusStage {
             classes,
         };
         if self.save_pngs {
-            let path = self
-                .out_dir
-                .join(SEGMENTS_DIR)
+            let path = RunDir::new(&self.out_dir)
+                .segments_dir()
                 .join(format!("{:06}.png", h.stamp.seq));
             if let Err(e) = opengs_eval::write_label_png(&path, h.width, h.height, &seg.label_map) {
                 tracing::warn!("segments #{}: {e}", h.stamp.seq);
@@ -236,11 +247,13 @@ impl ConsensusStage {
                 return Ok(());
             }
         };
-        let wire = WireResult::new(&out, self.consensus.config().counter_prune_scale);
+        let wire = WireResult::new(&out);
         let parts = wire.parts(&out.consistent_label_map);
         let mut stamp = Stamp::derived(MessageKind::Consensus, &seg.stamp);
         stamp.stage_start_ns = start;
-        let header = ConsensusHeader::new(stamp, seg.width as u32, seg.height as u32, &parts);
+        let theta = self.consensus.config().counter_prune_scale;
+        let header =
+            ConsensusHeader::new(stamp, seg.width as u32, seg.height as u32, theta, &parts);
         self.out.send(header, |hd, buf| hd.encode(&parts, buf))?;
         tracing::info!(
             "keyframe #{seq}: {} input labels → {} global labels, {} relabel regions, {} counter regions",
@@ -250,7 +263,7 @@ impl ConsensusStage {
             out.counter_pruning.len()
         );
         if let Err(e) = save_table(&self.out_dir, self.consensus.table()) {
-            tracing::error!("saving {LABEL_TABLE}: {e:#}");
+            tracing::error!("saving the label table: {e:#}");
         }
         self.telemetry.processed(&seg.stamp, start, now_ns());
         Ok(())
@@ -268,13 +281,12 @@ fn insert_bounded<T>(map: &mut BTreeMap<u64, T>, seq: u64, value: T, cap: usize)
 struct WireResult {
     mapping: Vec<[u32; 2]>,
     relabels: Vec<PixelRun>,
-    prunes: Vec<PixelRun>,
+    prunes: Vec<PruneRun>,
     pixels: Vec<u32>,
 }
 
 impl WireResult {
-    /// Prune runs carry θ (f32 bits) in `to`: the mapper applies it.
-    fn new(out: &ConsensusOutput, theta: f32) -> Self {
+    fn new(out: &ConsensusOutput) -> Self {
         let mapping = out
             .assignments
             .iter()
@@ -284,25 +296,36 @@ impl WireResult {
             })
             .collect();
         let mut pixels = Vec::new();
-        let mut run = |from: u32, to: u32, px: &[u32]| {
-            let r = PixelRun {
-                from,
-                to,
-                offset: pixels.len() as u32,
-                count: px.len() as u32,
-            };
+        // Appends a region's pixels to the one list; returns its (offset, count) there.
+        let mut span = |px: &[u32]| {
+            let offset = pixels.len() as u32;
             pixels.extend_from_slice(px);
-            r
+            (offset, px.len() as u32)
         };
         let relabels = out
             .relabels
             .iter()
-            .map(|r| run(r.from, r.to, &r.pixels))
+            .map(|r| {
+                let (offset, count) = span(&r.pixels);
+                PixelRun {
+                    from: r.from,
+                    to: r.to,
+                    offset,
+                    count,
+                }
+            })
             .collect();
         let prunes = out
             .counter_pruning
             .iter()
-            .map(|r| run(r.label, theta.to_bits(), &r.pixels))
+            .map(|r| {
+                let (offset, count) = span(&r.pixels);
+                PruneRun {
+                    label: r.label,
+                    offset,
+                    count,
+                }
+            })
             .collect();
         Self {
             mapping,
@@ -324,7 +347,7 @@ impl WireResult {
 }
 
 fn save_table(out_dir: &Path, table: &GlobalLabelTable) -> anyhow::Result<()> {
-    let path = out_dir.join(LABEL_TABLE);
+    let path = RunDir::new(out_dir).label_table();
     let tmp = path.with_extension("json.tmp");
     std::fs::write(&tmp, serde_json::to_vec_pretty(table)?)?;
     std::fs::rename(&tmp, &path)?;
@@ -333,7 +356,7 @@ fn save_table(out_dir: &Path, table: &GlobalLabelTable) -> anyhow::Result<()> {
 
 /// The global table saved by a consensus stage in `run_dir`, if any.
 pub fn load_label_table(run_dir: &Path) -> anyhow::Result<Option<GlobalLabelTable>> {
-    let path = run_dir.join(LABEL_TABLE);
+    let path = RunDir::new(run_dir).label_table();
     if !path.exists() {
         return Ok(None);
     }
@@ -367,7 +390,7 @@ pub fn run_consensus(ctx: &RunContext, out_dir: &Path, args: &ConsensusArgs) -> 
     };
     std::fs::create_dir_all(out_dir)?;
     if !args.no_segment_pngs {
-        std::fs::create_dir_all(out_dir.join(SEGMENTS_DIR))?;
+        std::fs::create_dir_all(RunDir::new(out_dir).segments_dir())?;
     }
     let node = ctx.node("consensus")?;
     let segments = Inlet::<SegmentsHeader>::new(ctx, &node, &SEGMENTS)?;

@@ -15,6 +15,15 @@ pub enum StageRole {
     Worker,
 }
 
+/// The stage names of the built-in deploy files, which `opengs run` addresses by name.
+pub mod stage_names {
+    pub const SENSOR: &str = "sensor";
+    pub const TRACKER: &str = "tracker";
+    pub const MAPPER: &str = "mapper";
+    pub const SEGMENTER: &str = "segmenter";
+    pub const CONSENSUS: &str = "consensus";
+}
+
 /// One stage process.
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]

@@ -5,30 +5,13 @@
 //! texture detail finer than the 2 cm keyframe sampling stays blurred until this pass.
 
 use std::ops::ControlFlow;
-use std::sync::atomic::AtomicBool;
-use std::sync::Arc;
-use std::time::{Duration, Instant};
+use std::time::Instant;
 
 use opengs_datasets::RgbdFrame;
 use opengs_geometry::{Intrinsics, Pose};
 use opengs_mapping::{gaussians_for_holes, DensifyInput, MapperConfig};
 use opengs_quality::{refine, RefineConfig, RefineStats};
-use opengs_runtime::{CallbackProgression, WaitSet};
 use opengs_splat::{downscale_camera2, Camera, GaussianMap};
-
-/// The signal the supervisor sends a stage to ask it to finish its work and exit.
-pub const FINISH_SIGNAL: i32 = libc::SIGUSR1;
-
-/// Registers the finish signal; the returned flag turns true when it arrives. iceoryx2
-/// installs its own handlers for every non-fatal signal (without chaining) the first time a
-/// WaitSet checks for termination, so that check is made first: ours then chains to its.
-pub fn finish_requested_flag(ws: &WaitSet) -> anyhow::Result<Arc<AtomicBool>> {
-    let _ =
-        ws.wait_and_process_once_with_timeout(|_| CallbackProgression::Continue, Duration::ZERO);
-    let flag = Arc::new(AtomicBool::new(false));
-    signal_hook::flag::register(FINISH_SIGNAL, Arc::clone(&flag))?;
-    Ok(flag)
-}
 
 /// Full-resolution keyframes kept for the final optimisation (RGB8 and raw depth: about
 /// 1.5 MB per 640×480 keyframe). Past `max` keyframes every other one is dropped, so the

@@ -1,6 +1,7 @@
-//! Pipeline glue with no algorithm in it: deploy files, the supervisor that
-//! starts, watches, restarts and stops stage processes, the sensor loop, and
-//! the run recorder. Stage binaries in `services/` call into this crate.
+//! Pipeline glue: deploy files, the stage loops that connect the algorithm crates to their
+//! IPC services (`*_stage`), the supervisor that starts, watches, restarts and stops stage
+//! processes, and what a run does around it ([`run`]): its outputs, its scores, its progress
+//! display. Stage binaries in `services/` call into this crate.
 
 pub mod consensus_stage;
 pub mod dataset_args;
@@ -9,7 +10,12 @@ pub mod final_optimisation;
 pub mod logging;
 pub mod mapper_stage;
 pub mod metrics;
+pub mod progress;
 pub mod recorder;
+pub mod run;
+pub mod run_outputs;
+pub mod run_record;
+pub mod scoring;
 pub mod segmenter_stage;
 pub mod semantic_eval;
 pub mod sensor;
@@ -21,4 +27,6 @@ pub mod tracker_stage;
 
 pub use dataset_args::DatasetArgs;
 pub use deploy::{DeployFile, StageSpec};
-pub use supervisor::{RunOptions, RunSummary, Supervisor};
+pub use run::{run, RunOptions, RunSummary, StageFlags};
+pub use run_record::{RunRecord, StageRecord};
+pub use supervisor::{Supervised, Supervisor};

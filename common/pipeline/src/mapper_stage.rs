@@ -9,6 +9,7 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
+use opengs_eval::RunDir;
 use opengs_geometry::{pose_from_tum, Intrinsics};
 use opengs_ipc_schema::service::{CONSENSUS, KEYFRAMES, MAP_TARGET, RENDERS, SEGMENTS};
 use opengs_ipc_schema::{
@@ -22,7 +23,28 @@ use opengs_runtime::{
 use opengs_semantics::{CounterPruneRegion, RelabelInstruction};
 use opengs_splat::{read_ply_file, write_ply_file, Camera, GaussianMap};
 
-use crate::final_optimisation::{fill_holes, finish_requested_flag, optimise_final, KeptKeyframes};
+use crate::final_optimisation::{fill_holes, optimise_final, KeptKeyframes};
+use opengs_runtime::finish_requested_flag;
+
+/// The mapper's flags that `opengs run` sets ([`crate::run::StageFlags`]); one struct for
+/// parsing and for writing them.
+#[derive(clap::Args, Debug, Clone, Default, PartialEq)]
+pub struct MapperRunFlags {
+    /// Full-resolution optimisation steps (with splitting) run when the supervisor signals
+    /// the end of the data (SIGUSR1), before `map.ply` is written; 0 = none. SIGTERM during
+    /// them stops early and keeps the map as it is.
+    #[arg(long, default_value_t = 0)]
+    pub finish_steps: usize,
+}
+
+impl MapperRunFlags {
+    pub fn to_args(&self) -> Vec<String> {
+        match self.finish_steps {
+            0 => Vec::new(),
+            n => vec!["--finish-steps".into(), n.to_string()],
+        }
+    }
+}
 
 /// Options of the mapper stage.
 #[derive(clap::Args, Debug, Clone)]
@@ -39,11 +61,8 @@ pub struct MapperArgs {
     /// K of the per-pixel top-K kept from each render for the consensus (METHOD §3).
     #[arg(long, default_value_t = opengs_splat::DEFAULT_TOP_K)]
     pub top_k: usize,
-    /// Full-resolution optimisation steps (with splitting) run when the supervisor signals
-    /// the end of the data (SIGUSR1), before `map.ply` is written; 0 = none. SIGTERM during
-    /// them stops early and keeps the map as it is.
-    #[arg(long, default_value_t = 0)]
-    pub finish_steps: usize,
+    #[command(flatten)]
+    pub run: MapperRunFlags,
     /// Full-resolution keyframes kept for those steps (about 1.5 MB each at 640×480); past
     /// this every other one is dropped.
     #[arg(long, default_value_t = 300)]
@@ -54,10 +73,6 @@ pub struct MapperArgs {
 const KEPT_CAMERAS: usize = 32;
 /// A consensus not back by then is given up on (dropped or refused), and renders go on.
 const CONSENSUS_TIMEOUT: Duration = Duration::from_secs(5);
-/// Keyframe seqs, one per line, appended as keyframes arrive (held-out frames for evaluation).
-pub const KEYFRAME_LIST: &str = "keyframes.txt";
-
-const CHECKPOINT: &str = "map_checkpoint.ply";
 
 /// Writes atomically (temp file + rename): a crash mid-write keeps the previous checkpoint.
 fn write_map_atomically(map: &GaussianMap, path: &Path) -> anyhow::Result<()> {
@@ -171,10 +186,10 @@ impl MapperStage {
         let appended = std::fs::OpenOptions::new()
             .create(true)
             .append(true)
-            .open(self.out_dir.join(KEYFRAME_LIST))
+            .open(RunDir::new(&self.out_dir).keyframes())
             .and_then(|mut f| writeln!(f, "{seq}"));
         if let Err(e) = appended {
-            tracing::warn!("{KEYFRAME_LIST}: {e}");
+            tracing::warn!("keyframe list: {e}");
         }
     }
 
@@ -210,7 +225,6 @@ impl MapperStage {
                 label: v.label,
                 visible: v.visible,
                 total: v.total,
-                confidence: 0.0,
             })
             .collect();
         let mut stamp = Stamp::derived(MessageKind::Render, &h.stamp);
@@ -256,27 +270,17 @@ impl MapperStage {
             .prunes
             .iter()
             .map(|r| CounterPruneRegion {
-                label: r.from,
+                label: r.label,
                 pixels: pixels(r.offset, r.count),
             })
             .collect();
-        // Prune runs carry θ (f32 bits); every run of one result carries the same.
-        let theta = res
-            .prunes
-            .first()
-            .map_or(f32::INFINITY, |r| f32::from_bits(r.to));
-        let theta_ok = res.prunes.is_empty() || (theta.is_finite() && theta > 0.0);
-        if !theta_ok {
-            tracing::error!("consensus #{seq} rejected: counter-pruning scale {theta} is not > 0");
-            self.telemetry.dropped(&h.stamp);
-            return;
-        }
         let update = ConsensusUpdate {
             seq,
             consistent_label_map: res.label_map,
             relabels: &relabels,
             counter_regions: &regions,
-            counter_prune_scale: theta,
+            // Validated by decode: finite and > 0.
+            counter_prune_scale: h.counter_prune_scale,
         };
         match self.mapper.apply_consensus(&update) {
             Ok(done) => {
@@ -299,7 +303,10 @@ impl MapperStage {
         if self.mapper.map().is_empty() {
             return;
         }
-        if let Err(e) = write_map_atomically(self.mapper.map(), &self.out_dir.join(CHECKPOINT)) {
+        if let Err(e) = write_map_atomically(
+            self.mapper.map(),
+            &RunDir::new(&self.out_dir).map_checkpoint(),
+        ) {
             tracing::error!("checkpoint failed: {e:#}");
         }
     }
@@ -316,7 +323,8 @@ pub fn run_mapper(ctx: &RunContext, out_dir: &Path, args: &MapperArgs) -> anyhow
         ..MapperConfig::default()
     };
     let near = config.near;
-    let checkpoint = out_dir.join(CHECKPOINT);
+    let run = RunDir::new(out_dir);
+    let checkpoint = run.map_checkpoint();
     let mapper = if checkpoint.exists() {
         let map = read_ply_file(&checkpoint)?;
         tracing::info!(
@@ -339,7 +347,7 @@ pub fn run_mapper(ctx: &RunContext, out_dir: &Path, args: &MapperArgs) -> anyhow
         telemetry: TelemetrySink::new(ctx, &node, "mapper")?,
         map_version: 0,
         out_dir: out_dir.to_path_buf(),
-        kept: (args.finish_steps > 0).then(|| KeptKeyframes::new(args.finish_keyframes)),
+        kept: (args.run.finish_steps > 0).then(|| KeptKeyframes::new(args.finish_keyframes)),
     };
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(args.threads.max(1))
@@ -440,7 +448,7 @@ pub fn run_mapper(ctx: &RunContext, out_dir: &Path, args: &MapperArgs) -> anyhow
     let mut finish_stats = None;
     let mut holes_filled = None;
     if let Some(kept) = kept.filter(|_| finishing) {
-        let steps = args.finish_steps;
+        let steps = args.run.finish_steps;
         tracing::info!(
             "end of data: final optimisation, {steps} full-resolution steps on {} keyframes",
             kept.len()
@@ -500,8 +508,8 @@ pub fn run_mapper(ctx: &RunContext, out_dir: &Path, args: &MapperArgs) -> anyhow
     }
     let seconds = started.elapsed().as_secs_f64();
     if !map.is_empty() {
-        write_map_atomically(&map, &out_dir.join("map.ply"))?;
-        write_map_atomically(&map, &out_dir.join(CHECKPOINT))?;
+        write_map_atomically(&map, &run.map())?;
+        write_map_atomically(&map, &run.map_checkpoint())?;
     }
     let stats = serde_json::json!({
         "iterations": iterations,
@@ -514,10 +522,7 @@ pub fn run_mapper(ctx: &RunContext, out_dir: &Path, args: &MapperArgs) -> anyhow
         "holes_filled": holes_filled,
         "total_seconds": seconds,
     });
-    std::fs::write(
-        out_dir.join("mapper.json"),
-        serde_json::to_string_pretty(&stats)?,
-    )?;
+    std::fs::write(run.mapper_report(), serde_json::to_string_pretty(&stats)?)?;
     tracing::info!("mapper: {stats}");
     Ok(())
 }

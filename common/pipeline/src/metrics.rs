@@ -3,6 +3,7 @@
 
 use std::path::Path;
 
+use opengs_eval::RunDir;
 use opengs_eval::{absolute_trajectory_error, read_tum_trajectory};
 use serde::{Deserialize, Serialize};
 
@@ -23,10 +24,11 @@ pub struct RunMetrics {
 
 /// Computes the metrics of `run_dir` and writes `metrics.json`.
 pub fn evaluate_run(run_dir: &Path) -> anyhow::Result<RunMetrics> {
-    let traj_path = run_dir.join("trajectory.txt");
+    let run = RunDir::new(run_dir);
+    let traj_path = run.trajectory();
     let estimated = read_tum_trajectory(&traj_path)?;
-    let gt_path = run_dir.join("groundtruth.txt");
-    let lost_path = run_dir.join(crate::recorder::LOST_FRAMES);
+    let gt_path = run.groundtruth();
+    let lost_path = run.lost();
     let frames_lost = match std::fs::read_to_string(&lost_path) {
         Ok(text) => text
             .lines()
@@ -53,6 +55,6 @@ pub fn evaluate_run(run_dir: &Path) -> anyhow::Result<RunMetrics> {
     let serde_json::Value::Object(entries) = serde_json::to_value(&metrics)? else {
         anyhow::bail!("metrics did not serialise to an object");
     };
-    opengs_quality::merge_metrics_json(&run_dir.join("metrics.json"), entries)?;
+    opengs_quality::merge_metrics_json(&run.metrics(), entries)?;
     Ok(metrics)
 }

@@ -4,12 +4,10 @@
 use std::collections::BTreeMap;
 use std::path::Path;
 
+use opengs_eval::RunDir;
 use opengs_eval::{write_tum_trajectory, TimedPose, TrajectoryError};
 use opengs_geometry::{pose_from_tum, Pose};
 use opengs_ipc_schema::{PoseHeader, PoseStatus};
-
-/// Frames without a verified pose, one per line (`timestamp seq status`).
-pub const LOST_FRAMES: &str = "lost.txt";
 
 /// One tracked frame.
 #[derive(Debug, Clone)]
@@ -92,8 +90,9 @@ impl Recorder {
             .filter(|f| f.status.has_pose())
             .map(|f| timed(&f.pose, f.timestamp))
             .collect();
-        write_tum_trajectory(&dir.join("trajectory.txt"), &estimated)?;
-        let lost_path = dir.join(LOST_FRAMES);
+        let run = RunDir::new(dir);
+        write_tum_trajectory(&run.trajectory(), &estimated)?;
+        let lost_path = run.lost();
         let mut lost = String::from("# frames without a verified pose: timestamp seq status\n");
         for (seq, f) in self.frames.iter().filter(|(_, f)| !f.status.has_pose()) {
             lost.push_str(&format!("{:.6} {seq} {:?}\n", f.timestamp, f.status));
@@ -108,7 +107,7 @@ impl Recorder {
             .filter_map(|f| f.gt.as_ref().map(|g| timed(g, f.timestamp)))
             .collect();
         if !gt.is_empty() {
-            write_tum_trajectory(&dir.join("groundtruth.txt"), &gt)?;
+            write_tum_trajectory(&run.groundtruth(), &gt)?;
         }
         Ok(())
     }

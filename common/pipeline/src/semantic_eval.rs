@@ -9,13 +9,13 @@ use std::path::Path;
 
 use image::{ImageBuffer, Rgb};
 use opengs_datasets::{RgbdFrame, RgbdSource};
+use opengs_eval::RunDir;
 use opengs_eval::{read_label_png, read_tum_trajectory, LabelConfusion, SegmentationScore};
 use opengs_quality::{merge_metrics_json, png_positions, read_map, FrameMatcher, DEFAULT_NEAR};
 use opengs_splat::{label_color, render, Camera, GaussianMap, RenderRequest};
 use serde::Serialize;
 
 use crate::consensus_stage::load_label_table;
-use crate::mapper_stage::KEYFRAME_LIST;
 
 /// Label-map PNGs written per run (evenly spread over the scored frames).
 const LABEL_PNGS: usize = 6;
@@ -39,22 +39,20 @@ pub fn evaluate_run_semantics(
     source: &mut dyn RgbdSource,
     every_n: usize,
 ) -> anyhow::Result<SemanticReport> {
-    let map = read_map(&run_dir.join("map.ply"))?;
+    let run = RunDir::new(run_dir);
+    let map = read_map(&run.map())?;
     let counts = map.count_per_label();
     let labels = match load_label_table(run_dir)? {
         Some(table) => {
             let records = table.records(|id| counts.get(&id).copied().unwrap_or(0) as u64);
-            std::fs::write(
-                run_dir.join("labels.json"),
-                serde_json::to_string_pretty(&records)? + "\n",
-            )?;
+            std::fs::write(run.labels(), serde_json::to_string_pretty(&records)? + "\n")?;
             records.len()
         }
         None => 0,
     };
-    let keyframes = read_keyframes(&run_dir.join(KEYFRAME_LIST))?;
+    let keyframes = read_keyframes(&run.keyframes())?;
     let map_score = score_map(run_dir, &map, source, every_n, &keyframes)?;
-    let raw = score_segments(&run_dir.join("segments"), source)?;
+    let raw = score_segments(&run.segments_dir(), source)?;
     let report = SemanticReport {
         map: map_score,
         raw,
@@ -62,7 +60,7 @@ pub fn evaluate_run_semantics(
         map_labels: counts.keys().filter(|&&l| l != 0).count(),
     };
     std::fs::write(
-        run_dir.join("semantics.json"),
+        run.semantics(),
         serde_json::to_string_pretty(&report)? + "\n",
     )?;
     let mut entries = serde_json::Map::new();
@@ -78,7 +76,7 @@ pub fn evaluate_run_semantics(
     }
     entries.insert("labels".into(), report.labels.into());
     entries.insert("map_labels".into(), report.map_labels.into());
-    merge_metrics_json(&run_dir.join("metrics.json"), entries)?;
+    merge_metrics_json(&run.metrics(), entries)?;
     Ok(report)
 }
 
@@ -115,7 +113,8 @@ fn score_map(
     every_n: usize,
     keyframes: &BTreeSet<u64>,
 ) -> anyhow::Result<Option<SegmentationScore>> {
-    let trajectory = read_tum_trajectory(&run_dir.join("trajectory.txt"))?;
+    let run = RunDir::new(run_dir);
+    let trajectory = read_tum_trajectory(&run.trajectory())?;
     let k = source.intrinsics();
     let mut matcher = FrameMatcher::new(source);
     let mut confusion = LabelConfusion::new();
@@ -123,7 +122,7 @@ fn score_map(
     let starts: Vec<usize> = (every_n / 2..trajectory.len()).step_by(every_n).collect();
     // Spread over the slots, chosen up front so no label map has to be kept for later.
     let pngs = png_positions(starts.len(), LABEL_PNGS);
-    let renders = run_dir.join("renders");
+    let renders = run.renders_dir();
     for (slot, &start) in starts.iter().enumerate() {
         // Held-out poses only: the first non-keyframe at or after `start`.
         let mut found = None;

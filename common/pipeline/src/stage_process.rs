@@ -123,7 +123,7 @@ impl StageProcess {
         unsafe {
             cmd.pre_exec(move || {
                 // Die with the supervisor, whatever kills it.
-                libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGTERM);
+                libc::prctl(libc::PR_SET_PDEATHSIG, opengs_runtime::STOP_SIGNAL);
                 if policy != libc::SCHED_OTHER {
                     let param = libc::sched_param { sched_priority: 0 };
                     // Ignore failure (a kernel without the policy): normal scheduling.
@@ -212,7 +212,7 @@ impl StageProcess {
             return;
         };
         // SAFETY: signalling our own child by pid.
-        unsafe { libc::kill(child.id() as i32, libc::SIGTERM) };
+        unsafe { libc::kill(child.id() as i32, opengs_runtime::STOP_SIGNAL) };
         let deadline = Instant::now() + grace;
         loop {
             match child.try_wait() {

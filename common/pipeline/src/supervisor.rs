@@ -1,80 +1,69 @@
-//! `opengs run`: start the stages of a deploy file as processes, wait for each
-//! to be ready, restart the ones that die, collect telemetry and poses, and on
-//! end of data or Ctrl-C stop everything in order and write the run outputs.
+//! The supervisor of one run: starts the stages of a deploy file as processes, waits for
+//! each to be ready, restarts the ones that die, swaps them on request, answers `opengs ctl`,
+//! collects telemetry and poses, and on end of data, Ctrl-C or `ctl stop` stops everything in
+//! order. It hands back what it collected ([`Supervised`]); [`crate::run`] writes the outputs
+//! and scores them.
 
-use std::collections::BTreeMap;
-use std::io::IsTerminal;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
+use opengs_eval::RunDir;
 use opengs_ipc_schema::service::{CONTROL_REPLIES, CONTROL_REQUESTS, POSES, TELEMETRY};
 use opengs_ipc_schema::{
     ControlCommand, ControlHeader, PoseHeader, TelemetryEvent, TelemetryHeader,
 };
+use opengs_runtime::FINISH_SIGNAL;
 use opengs_runtime::{
     waitset, ActiveRun, ActiveRuns, CallbackProgression, Inlet, Outlet, RunContext, WaitSet,
     WaitSetRunResult,
 };
-use opengs_telemetry::{ChromeTrace, LatencyProfile, LatencyReport, StageSample};
+use opengs_telemetry::{ChromeTrace, LatencyProfile, StageSample};
 
 use crate::deploy::{DeployFile, StageRole};
-use crate::final_optimisation::FINISH_SIGNAL;
+use crate::progress::Progress;
 use crate::recorder::Recorder;
+use crate::run::{RunOptions, StageFlags};
+use crate::run_record::StageRecord;
 use crate::stage_process::{StageProcess, StageState};
 use crate::status::{PipelineStatus, StageStatus};
-use crate::DatasetArgs;
 
-/// Everything `opengs run` decides before the stages start.
-pub struct RunOptions {
-    pub deploy: DeployFile,
-    pub dataset: DatasetArgs,
-    pub out_dir: PathBuf,
-    pub run_id: String,
-    /// Sensor pacing (`None` = dataset rate, 0 = as fast as possible).
-    pub max_rate: Option<f64>,
-    /// Extra arguments per stage name (e.g. the tracker's `--gt-first-pose`).
-    pub stage_args: BTreeMap<String, Vec<String>>,
-    /// Show a progress bar / periodic progress lines.
-    pub progress: bool,
-    /// Score rendered views against every Nth frame at the end (0 = skip).
-    pub quality_every: usize,
-    /// At the end of the data, let stages with a `finish_timeout_s` do their final work
-    /// (else every stage is stopped at once).
-    pub finish_after_data: bool,
-}
-
-/// What a finished run produced.
-pub struct RunSummary {
-    pub out_dir: PathBuf,
-    pub frames_published: u64,
-    pub poses: usize,
-    pub keyframes: usize,
-    /// Frames without a verified pose, and relocalisations after them.
-    pub lost_frames: usize,
-    pub relocalisations: usize,
-    pub elapsed_s: f64,
-    /// Seconds until the data ended (or the run stopped), without the stages' final work.
-    pub streaming_s: f64,
-    pub latency: LatencyReport,
-    pub restarts: BTreeMap<String, u32>,
-    pub interrupted: bool,
-    /// Files of this run still in /dev/shm or the iceoryx2 root after shutdown (should be none).
-    pub leftover_files: Vec<PathBuf>,
-    pub recorder: Recorder,
-    pub metrics: Option<crate::metrics::RunMetrics>,
-    pub quality: Option<opengs_quality::QualityReport>,
-    pub semantics: Option<crate::semantic_eval::SemanticReport>,
-}
-
-/// Why the main loop ended.
+/// Why supervision ended.
 #[derive(Debug, PartialEq)]
-enum Ending {
+pub enum Ending {
     EndOfData,
     Interrupted,
     StopRequested,
     StageFailed(String),
 }
 
+/// What the supervisor collected while the stages ran.
+pub struct Supervised {
+    /// How the main loop ended; an error when the pipeline could not start or run.
+    pub ending: anyhow::Result<Ending>,
+    /// Seconds until the data ended (or the run stopped), without the stages' final work.
+    pub streaming_s: f64,
+    pub recorder: Recorder,
+    pub profile: LatencyProfile,
+    pub trace: ChromeTrace,
+    /// Each stage's counters, in deploy order.
+    pub stages: Vec<StageRecord>,
+    /// Frames in the dataset as selected (unknown when it could not be opened).
+    pub frames_total: Option<usize>,
+    /// Files of this run still in /dev/shm or the iceoryx2 root after shutdown (should be none).
+    pub leftover_files: Vec<PathBuf>,
+}
+
+impl Supervised {
+    /// Messages the stage `name` processed (0 when there is no such stage).
+    pub fn processed(&self, name: &str) -> u64 {
+        self.stages
+            .iter()
+            .find(|s| s.name == name)
+            .map_or(0, |s| s.processed)
+    }
+}
+
+/// Starts, watches, restarts, swaps and stops the stage processes of one run.
 pub struct Supervisor;
 
 struct Channels {
@@ -85,8 +74,11 @@ struct Channels {
 }
 
 impl Supervisor {
-    pub fn run(opts: RunOptions) -> anyhow::Result<RunSummary> {
-        std::fs::create_dir_all(opts.out_dir.join("logs")).map_err(|e| {
+    /// Runs the pipeline of `opts` until the data ends, a stop is asked for, or a stage fails
+    /// for good; every stage is stopped and the run's shared memory removed on every path.
+    pub fn supervise(opts: &RunOptions) -> anyhow::Result<Supervised> {
+        let log_dir = RunDir::new(&opts.out_dir).logs_dir();
+        std::fs::create_dir_all(&log_dir).map_err(|e| {
             anyhow::anyhow!(
                 "cannot create run directory {}: {e}",
                 opts.out_dir.display()
@@ -101,7 +93,7 @@ impl Supervisor {
             out_dir: opts.out_dir.clone(),
         })?;
         let started = Instant::now();
-        let mut state = RunState::new(&opts);
+        let mut state = RunState::new(opts, log_dir);
         let mut streaming_s = None;
         // IPC objects live in this scope so they are gone before the leftover check.
         let ending = {
@@ -139,96 +131,34 @@ impl Supervisor {
                 leftover_files
             );
         }
-        // Outputs are written on every path: nothing produced is lost.
-        state.write_outputs(&opts.out_dir)?;
-        let metrics = if state.recorder.is_empty() {
-            None
-        } else {
-            match crate::metrics::evaluate_run(&opts.out_dir) {
-                Ok(m) => Some(m),
-                Err(e) => {
-                    eprintln!("metrics: {e:#}");
-                    None
-                }
-            }
-        };
-        // Scores need the map, poses, and a dataset with ground truth to compare with.
-        let scorable = opts.quality_every > 0
-            && opts.out_dir.join("map.ply").exists()
-            && !state.recorder.is_empty();
-        let quality = score_run(
-            &opts,
-            scorable,
-            &format!(
-                "rendered views against every {}th frame",
-                opts.quality_every
-            ),
-            |dir, source, every| Ok(opengs_quality::evaluate_run_quality(dir, source, every)?),
-        );
-        let semantics = score_run(
-            &opts,
-            scorable,
-            "labels (mIoU)",
-            crate::semantic_eval::evaluate_run_semantics,
-        );
-        let latency = state.profile.report();
-        let summary = RunSummary {
-            out_dir: opts.out_dir.clone(),
-            frames_published: state.stage_processed("sensor"),
-            poses: state.recorder.len(),
-            keyframes: state.recorder.keyframes(),
-            lost_frames: state.recorder.lost(),
-            relocalisations: state.recorder.relocalised(),
-            elapsed_s: started.elapsed().as_secs_f64(),
+        let stages = state
+            .stages
+            .iter()
+            .map(|s| StageRecord {
+                name: s.spec.name.clone(),
+                restarts: s.restarts,
+                processed: s.processed,
+                last_seq: s.last_seq,
+            })
+            .collect();
+        Ok(Supervised {
+            ending,
             streaming_s: streaming_s.unwrap_or_else(|| started.elapsed().as_secs_f64()),
-            latency,
-            restarts: state
-                .stages
-                .iter()
-                .map(|s| (s.spec.name.clone(), s.restarts))
-                .collect(),
-            interrupted: matches!(ending, Ok(Ending::Interrupted)),
+            recorder: state.recorder,
+            profile: state.profile,
+            trace: state.trace,
+            stages,
+            frames_total: state.total_frames,
             leftover_files,
-            recorder: std::mem::take(&mut state.recorder),
-            metrics,
-            quality,
-            semantics,
-        };
-        match ending? {
-            Ending::StageFailed(why) => Err(anyhow::anyhow!(
-                "{why}; outputs so far are in {}",
-                opts.out_dir.display()
-            )),
-            _ => Ok(summary),
-        }
+        })
     }
-}
-
-/// Runs one end-of-run scoring over the run's dataset; a failure is reported, not fatal
-/// (the run's outputs are already written).
-fn score_run<T>(
-    opts: &RunOptions,
-    scorable: bool,
-    what: &str,
-    score: impl FnOnce(&Path, &mut dyn opengs_datasets::RgbdSource, usize) -> anyhow::Result<T>,
-) -> Option<T> {
-    if !scorable {
-        return None;
-    }
-    eprintln!("scoring {what} ...");
-    let scored = opts
-        .dataset
-        .spec()
-        .and_then(|spec| Ok(opengs_datasets::open_dataset(&spec)?))
-        .and_then(|mut source| score(&opts.out_dir, source.as_mut(), opts.quality_every));
-    scored.map_err(|e| eprintln!("scoring {what}: {e:#}")).ok()
 }
 
 struct RunState {
     run_id: String,
     out_dir: PathBuf,
     stages: Vec<StageProcess>,
-    stage_args: BTreeMap<String, Vec<String>>,
+    stage_flags: StageFlags,
     source_args: Vec<String>,
     deploy: DeployFile,
     profile: LatencyProfile,
@@ -238,7 +168,6 @@ struct RunState {
     total_frames: Option<usize>,
     progress: Option<Progress>,
     dataset_args: Vec<String>,
-    dataset: DatasetArgs,
     log_dir: PathBuf,
     swap: Option<PendingSwap>,
 }
@@ -253,8 +182,7 @@ struct PendingSwap {
 }
 
 impl RunState {
-    fn new(opts: &RunOptions) -> Self {
-        let log_dir = opts.out_dir.join("logs");
+    fn new(opts: &RunOptions, log_dir: PathBuf) -> Self {
         let mut source_args = opts.dataset.to_args();
         if let Some(r) = opts.max_rate {
             source_args.extend(["--max-rate".into(), r.to_string()]);
@@ -274,7 +202,7 @@ impl RunState {
                 .iter()
                 .map(|s| StageProcess::new(s.clone(), &log_dir))
                 .collect(),
-            stage_args: opts.stage_args.clone(),
+            stage_flags: opts.stage_flags.clone(),
             source_args,
             deploy: opts.deploy.clone(),
             profile: LatencyProfile::new(opts.deploy.terminal_stage.as_deref()),
@@ -284,7 +212,6 @@ impl RunState {
             total_frames,
             progress: opts.progress.then(|| Progress::new(total_frames)),
             dataset_args: opts.dataset.to_args(),
-            dataset: opts.dataset.clone(),
             log_dir,
             swap: None,
         }
@@ -314,19 +241,12 @@ impl RunState {
         if let Some(kind) = &s.spec.kind {
             a.extend(["--kind".to_string(), kind.clone()]);
         }
-        if let Some(extra) = self.stage_args.get(&s.spec.name) {
-            a.extend(extra.iter().cloned());
-        }
+        a.extend(self.stage_flags.for_stage(&s.spec.name));
         a
     }
 
     fn stage_index(&self, name: &str) -> Option<usize> {
         self.stages.iter().position(|s| s.spec.name == name)
-    }
-
-    fn stage_processed(&self, name: &str) -> u64 {
-        self.stage_index(name)
-            .map_or(0, |i| self.stages[i].processed)
     }
 
     /// Starts each stage in deploy order and waits until it reports ready.
@@ -815,101 +735,11 @@ impl RunState {
         self.handle_poses(ch);
     }
 
-    fn write_outputs(&self, dir: &std::path::Path) -> anyhow::Result<()> {
-        if !self.recorder.is_empty() {
-            self.recorder.write(dir)?;
-        }
-        self.profile.report().write(&dir.join("latency.json"))?;
-        self.trace.write(&dir.join("trace.json"))?;
-        let status = serde_json::json!({
-            "run_id": self.run_id,
-            "dataset_args": self.dataset,
-            "frames_total": self.total_frames,
-            "stages": self.stages.iter().map(|s| serde_json::json!({
-                "name": s.spec.name, "restarts": s.restarts, "processed": s.processed, "last_seq": s.last_seq,
-            })).collect::<Vec<_>>(),
-        });
-        std::fs::write(dir.join("run.json"), serde_json::to_string_pretty(&status)?)?;
-        Ok(())
-    }
-
     fn note(&self, msg: &str) {
         // Lifecycle events (starts, deaths, restarts) are always shown, even with --quiet.
         match &self.progress {
             Some(p) => p.println(msg),
             None => eprintln!("{msg}"),
-        }
-    }
-}
-
-/// Progress display: a bar on a terminal, a line every few seconds otherwise.
-struct Progress {
-    bar: Option<indicatif::ProgressBar>,
-    last_line: Instant,
-}
-
-impl Progress {
-    fn new(total: Option<usize>) -> Self {
-        let bar = std::io::stderr().is_terminal().then(|| {
-            let b = indicatif::ProgressBar::new(total.unwrap_or(0) as u64);
-            let style = indicatif::ProgressStyle::with_template(
-                "{spinner} [{elapsed_precise}] {bar:30} {pos}/{len} frames  {msg}",
-            )
-            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar());
-            b.set_style(style);
-            b
-        });
-        Self {
-            bar,
-            last_line: Instant::now(),
-        }
-    }
-
-    fn update(&mut self, stages: &[StageProcess], poses: usize, started: Instant) {
-        let secs = started.elapsed().as_secs_f64().max(1e-3);
-        let per_stage: Vec<String> = stages
-            .iter()
-            .map(|s| {
-                let restarts = if s.restarts > 0 {
-                    format!(" r{}", s.restarts)
-                } else {
-                    String::new()
-                };
-                format!(
-                    "{} {:.1}/s{restarts}",
-                    s.spec.name,
-                    s.processed as f64 / secs
-                )
-            })
-            .collect();
-        let msg = per_stage.join("  ");
-        let done = stages
-            .iter()
-            .find(|s| s.spec.role == StageRole::Source)
-            .map_or(poses as u64, |s| s.processed);
-        match &self.bar {
-            Some(b) => {
-                b.set_position(done);
-                b.set_message(msg);
-            }
-            None if self.last_line.elapsed() > Duration::from_secs(5) => {
-                self.last_line = Instant::now();
-                eprintln!("[{secs:6.1} s] {done} frames  {msg}");
-            }
-            None => {}
-        }
-    }
-
-    fn println(&self, msg: &str) {
-        match &self.bar {
-            Some(b) => b.println(msg),
-            None => eprintln!("{msg}"),
-        }
-    }
-
-    fn finish(&self) {
-        if let Some(b) = &self.bar {
-            b.finish_and_clear();
         }
     }
 }

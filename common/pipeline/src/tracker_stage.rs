@@ -19,12 +19,29 @@ pub struct TrackerArgs {
     /// Threads for registration.
     #[arg(long, default_value_t = 2)]
     pub threads: usize,
-    /// Start at the frame's ground-truth pose instead of the identity.
-    #[arg(long)]
-    pub gt_first_pose: bool,
+    #[command(flatten)]
+    pub run: TrackerRunFlags,
     /// Keep tracking against the tracker's own keyframe model even when the mapper sends Gaussians.
     #[arg(long)]
     pub ignore_map: bool,
+}
+
+/// The tracker's flags that `opengs run` sets ([`crate::run::StageFlags`]); one struct for
+/// parsing and for writing them, so the two cannot disagree.
+#[derive(clap::Args, Debug, Clone, Default, PartialEq)]
+pub struct TrackerRunFlags {
+    /// Start at the frame's ground-truth pose instead of the identity.
+    #[arg(long)]
+    pub gt_first_pose: bool,
+}
+
+impl TrackerRunFlags {
+    pub fn to_args(&self) -> Vec<String> {
+        match self.gt_first_pose {
+            true => vec!["--gt-first-pose".into()],
+            false => Vec::new(),
+        }
+    }
 }
 
 fn status_of(s: TrackStatus) -> PoseStatus {
@@ -208,7 +225,7 @@ pub fn run_tracker(ctx: &RunContext, args: &TrackerArgs) -> anyhow::Result<()> {
         poses: Outlet::new(ctx, &node, &POSES, 8)?,
         keyframes: Outlet::new(ctx, &node, &KEYFRAMES, 640 * 480 * 5 + 12_288 * 36 + 256)?,
         telemetry: TelemetrySink::new(ctx, &node, "tracker")?,
-        gt_first_pose: args.gt_first_pose,
+        gt_first_pose: args.run.gt_first_pose,
     };
     let ws = waitset()?;
     let _guard = ws

@@ -7,6 +7,8 @@ use serde_json::{Map, Value};
 use crate::report::QualityReport;
 use crate::QualityError;
 
+use opengs_eval::RunDir;
+
 /// Merges `entries` into the JSON object in `path` (created when absent; other keys kept).
 pub fn merge_metrics_json(path: &Path, entries: Map<String, Value>) -> Result<(), QualityError> {
     let json_error = |message: String| QualityError::Json {
@@ -51,7 +53,7 @@ pub fn write_quality_metrics(
         format!("quality_frames{suffix}"),
         Value::from(report.frames_evaluated),
     );
-    merge_metrics_json(&run_dir.join("metrics.json"), entries)
+    merge_metrics_json(&RunDir::new(run_dir).metrics(), entries)
 }
 
 /// Writes the whole report (per-frame scores included) as pretty JSON to `path`.

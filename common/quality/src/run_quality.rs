@@ -5,6 +5,7 @@ use std::path::Path;
 
 use opengs_datasets::RgbdSource;
 use opengs_eval::read_tum_trajectory;
+use opengs_eval::RunDir;
 use opengs_splat::{read_ply_file, GaussianMap};
 
 use crate::dataset_frames::evaluate_dataset_quality;
@@ -32,16 +33,12 @@ pub fn evaluate_run_quality(
     source: &mut dyn RgbdSource,
     every_n: usize,
 ) -> Result<QualityReport, QualityError> {
-    let map = read_map(&run_dir.join("map.ply"))?;
-    let trajectory = read_tum_trajectory(&run_dir.join("trajectory.txt"))?;
-    let report = evaluate_dataset_quality(
-        &map,
-        source,
-        &trajectory,
-        every_n,
-        Some(&run_dir.join("renders")),
-    )?;
-    write_report_json(&run_dir.join("quality.json"), &report)?;
+    let run = RunDir::new(run_dir);
+    let map = read_map(&run.map())?;
+    let trajectory = read_tum_trajectory(&run.trajectory())?;
+    let report =
+        evaluate_dataset_quality(&map, source, &trajectory, every_n, Some(&run.renders_dir()))?;
+    write_report_json(&run.quality(), &report)?;
     write_quality_metrics(run_dir, &report, "")?;
     Ok(report)
 }

@@ -5,12 +5,14 @@ mod active_run;
 mod channel;
 mod context;
 mod error;
+mod signals;
 mod telemetry_sink;
 
 pub use active_run::{ActiveRun, ActiveRuns};
 pub use channel::{Inlet, Outlet, Received};
 pub use context::{leftover_files, RunContext};
 pub use error::RuntimeError;
+pub use signals::{finish_requested_flag, FINISH_SIGNAL, STOP_SIGNAL};
 pub use telemetry_sink::TelemetrySink;
 
 pub use iceoryx2;

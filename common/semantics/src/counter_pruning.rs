@@ -2,12 +2,14 @@
 
 use crate::error::Result;
 use crate::output::CounterPruneRegion;
-use crate::top_k::{validate_regions, TopK};
+use opengs_splat::TopK;
+
+use crate::relabel::validate_regions;
 
 /// Counter Gaussians to prune: ids in the regions' top-K lists whose label is the region's ℓr
 /// and whose largest scale (metres, not log) is above `theta`. Sorted, without duplicates.
 pub fn select_counter_gaussians(
-    top_k: &impl TopK,
+    top_k: &TopK,
     labels: &[u32],
     max_scale: impl Fn(usize) -> f32,
     theta: f32,

@@ -56,8 +56,8 @@ mod intersection;
 mod label_table;
 mod matching;
 mod output;
+mod relabel;
 mod relation;
-mod top_k;
 
 pub use confidence::update_input_confidence;
 pub use config::ConsensusConfig;
@@ -71,5 +71,5 @@ pub use matching::Matching;
 pub use output::{
     ConsensusOutput, CounterPruneRegion, LabelAssignment, LabelTarget, RelabelInstruction,
 };
+pub use relabel::{apply_relabels, validate_regions};
 pub use relation::{pair_relation, PairRelation, Relation};
-pub use top_k::{apply_relabels, validate_regions, TopK, TopKView};

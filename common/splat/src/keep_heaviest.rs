@@ -250,7 +250,7 @@ mod tests {
     use rand_chacha::ChaCha8Rng;
 
     use super::*;
-    use crate::topk::heaviest_first;
+    use crate::top_k::heaviest_first;
 
     #[test]
     fn keep_heaviest_matches_selection() {

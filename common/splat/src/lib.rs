@@ -39,7 +39,7 @@ mod target;
 #[cfg(test)]
 mod tests;
 mod tiles;
-mod topk;
+mod top_k;
 mod train;
 mod train_bench;
 mod voting;
@@ -70,6 +70,6 @@ pub use render::{render, render_into, Rendered};
 pub use ssim::{blur as ssim_blur, ssim_plane, SsimScratch, SSIM_C1, SSIM_C2};
 pub use target::{downscale_camera2, TargetFrame};
 pub use tiles::{TileGrid, TileRect, TILE_PIXELS, TILE_SIZE};
-pub use topk::{stored_weight, PixelEntries, RowSpan, TopK, TopKBand};
+pub use top_k::{stored_weight, PixelEntries, RowSpan, TopK, TopKBand};
 pub use train::{train_step, StageMs, StepStats, TrainConfig, TrainWorkspace};
 pub use train_bench::{bench_train_steps, TrainBenchRow};

@@ -2,7 +2,7 @@
 
 use std::collections::BTreeMap;
 
-use crate::topk::TopK;
+use crate::top_k::TopK;
 
 /// Which outputs a render must produce. Colour, depth, silhouette always come; the rest
 /// cost (almost) nothing when not asked for.

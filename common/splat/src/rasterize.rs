@@ -6,7 +6,7 @@
 //! 16-lane row at a time (one AVX-512 register, two AVX2 ones; a portable build too, all
 //! bit-identical). For top-K every row visit is logged (one vector of 16 weights, see
 //! `row_log`); at the end of the tile each row's log is packed into the band's top-K store
-//! (per visit: id, lane mask, the reached pixels' weights; see `topk`), counting each pixel's
+//! (per visit: id, lane mask, the reached pixels' weights; see `top_k`), counting each pixel's
 //! contributions on the way. Pixels with more than K have their K heaviest chosen from their
 //! gathered column (a quickselect on lane bit masks, see `keep_heaviest`) and the rest of
 //! their entries unmarked. Voting (`row_votes`) costs nothing per visit while every Gaussian
@@ -31,7 +31,7 @@ use crate::project::Projected;
 use crate::row_log::{Columns, LogSimd, PackDst, RowLog};
 use crate::row_votes::RowVotes;
 use crate::tiles::{TileGrid, TILE_SIZE};
-use crate::topk::{key_rank, topk_key, RowSpan, TopKBand, KEPT_SHIFT};
+use crate::top_k::{key_rank, topk_key, RowSpan, TopKBand, KEPT_SHIFT};
 use crate::voting::vote;
 
 const T: usize = TILE_SIZE as usize;

@@ -7,7 +7,7 @@ use crate::output::{RenderOutput, RenderRequest};
 use crate::project::{project_into, Projected};
 use crate::rasterize::{rasterize_into, replay_pixel};
 use crate::tiles::{TileGrid, TILE_SIZE};
-use crate::topk::heaviest_first;
+use crate::top_k::heaviest_first;
 
 /// A forward pass with its intermediate data kept for a later backward pass.
 #[derive(Debug, Clone, Default)]

@@ -9,7 +9,7 @@
 //! 640×480, on one thread; the pack about 3 ms (with f32 weights; f16 took about 1.5 ms off).
 
 use crate::tiles::TILE_SIZE;
-use crate::topk::{store_weight, KEPT_SHIFT, WEIGHT_SCALE};
+use crate::top_k::{store_weight, KEPT_SHIFT, WEIGHT_SCALE};
 use half::f16;
 
 const T: usize = TILE_SIZE as usize;
@@ -379,7 +379,7 @@ static PACK8: [[u32; 8]; 256] = {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::topk::{load_weight, REACHED};
+    use crate::top_k::{load_weight, REACHED};
 
     /// The packers this CPU can run.
     fn simds_here() -> Vec<LogSimd> {

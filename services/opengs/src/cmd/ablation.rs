@@ -129,7 +129,7 @@ pub fn run(args: AblationArgs) -> anyhow::Result<()> {
             run.finish_steps = Some(run.finish_steps.unwrap_or(0));
             runs.push(match execute(&run) {
                 Ok(summary) => {
-                    let sem = summary.semantics.as_ref();
+                    let sem = summary.scores.semantics.as_ref();
                     Run {
                         setting: name.clone(),
                         repeat,

@@ -5,6 +5,8 @@ use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 
+use opengs_eval::RunDir;
+
 #[derive(clap::Args)]
 pub struct BenchMapArgs {
     /// Timed steps per case.
@@ -40,7 +42,7 @@ pub fn run(args: BenchMapArgs) -> anyhow::Result<()> {
 
 /// One line from a run's `mapper.json`.
 fn sustained_rates(dir: &Path) -> anyhow::Result<String> {
-    let path = dir.join("mapper.json");
+    let path = RunDir::new(dir).mapper_report();
     let text = std::fs::read_to_string(&path)
         .with_context(|| format!("{}: not a finished run's mapper output", path.display()))?;
     let v: serde_json::Value =

@@ -16,6 +16,7 @@ use opengs_datasets::tum::TUM_DEPTH_SCALE;
 use opengs_datasets::{
     write_dataset, DatasetFormat, DepthNoise, RgbdSource, SyntheticOptions, SyntheticSource,
 };
+use opengs_eval::RunDir;
 use serde::{Deserialize, Serialize};
 
 /// The real TUM trajectories the paths follow (data/tum_trajectories, CC BY 4.0), compiled
@@ -476,10 +477,11 @@ fn lost_after(run_dir: &Path, data: &Path, at: usize) -> anyhow::Result<(usize, 
     let Some(&t_at) = frame_times.get(at) else {
         anyhow::bail!("{}: no frame {at}", data.display());
     };
-    let verified = stamps(&run_dir.join("trajectory.txt"))?;
+    let run = RunDir::new(run_dir);
+    let verified = stamps(&run.trajectory())?;
     let first_verified = verified.iter().copied().find(|&t| t >= t_at - 1e-4);
     // Builds from before lost frames were reported write no lost.txt: none were reported.
-    let lost_path = run_dir.join(opengs_pipeline::recorder::LOST_FRAMES);
+    let lost_path = run.lost();
     let lost = match lost_path.exists() {
         true => stamps(&lost_path)?,
         false => Vec::new(),

@@ -2,6 +2,8 @@
 
 use std::path::PathBuf;
 
+use opengs_eval::RunDir;
+
 #[derive(clap::Args)]
 pub struct EvalArgs {
     /// A run directory written by `opengs run` (trajectory.txt, groundtruth.txt).
@@ -19,6 +21,6 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
         }
         _ => println!("{} frames; no groundtruth.txt, so no ATE", m.frames),
     }
-    println!("wrote {}", args.run_dir.join("metrics.json").display());
+    println!("wrote {}", RunDir::new(&args.run_dir).metrics().display());
     Ok(())
 }

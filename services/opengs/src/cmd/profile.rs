@@ -2,6 +2,7 @@
 
 use std::path::PathBuf;
 
+use opengs_eval::RunDir;
 use opengs_telemetry::LatencyReport;
 
 #[derive(clap::Args)]
@@ -11,7 +12,7 @@ pub struct ProfileArgs {
 }
 
 pub fn run(args: ProfileArgs) -> anyhow::Result<()> {
-    let report = LatencyReport::read(&args.run_dir.join("latency.json"))?;
+    let report = LatencyReport::read(&RunDir::new(&args.run_dir).latency())?;
     print!("{}", report.table());
     Ok(())
 }

@@ -10,7 +10,8 @@ use anyhow::Context;
 use indicatif::{ProgressBar, ProgressStyle};
 use opengs_datasets::open_dataset;
 use opengs_eval::read_tum_trajectory;
-use opengs_pipeline::DatasetArgs;
+use opengs_eval::RunDir;
+use opengs_pipeline::{DatasetArgs, RunRecord};
 use opengs_quality::{
     evaluate_dataset_quality, load_posed_frames, merge_metrics_json, refine, write_quality_metrics,
     write_report_json, QualityReport, RefineConfig,
@@ -66,15 +67,16 @@ pub fn run(args: RefineArgs) -> anyhow::Result<()> {
         args.min_scene_extent
     );
     let dataset = dataset_args(dir, args.dataset.as_deref())?;
-    let map_path = args.map.clone().unwrap_or_else(|| dir.join("map.ply"));
+    let run = RunDir::new(dir);
+    let map_path = args.map.clone().unwrap_or_else(|| run.map());
     let mut map =
         read_ply_file(&map_path).with_context(|| format!("reading {}", map_path.display()))?;
     anyhow::ensure!(!map.is_empty(), "{}: the map is empty", map_path.display());
-    let trajectory = read_tum_trajectory(&dir.join("trajectory.txt"))?;
+    let trajectory = read_tum_trajectory(&run.trajectory())?;
     anyhow::ensure!(
         !trajectory.is_empty(),
         "{}: no poses",
-        dir.join("trajectory.txt").display()
+        run.trajectory().display()
     );
     let spec = dataset.spec()?;
     let mut source =
@@ -93,7 +95,7 @@ pub fn run(args: RefineArgs) -> anyhow::Result<()> {
         source.as_mut(),
         &trajectory,
         args.eval_every,
-        Some(&dir.join("renders")),
+        Some(&run.renders_dir()),
     )
     .context("evaluating the map before refinement")?;
     print_quality("before", &before);
@@ -167,9 +169,9 @@ pub fn run(args: RefineArgs) -> anyhow::Result<()> {
     .context("evaluating the refined map")?;
     print_quality("after", &after);
 
-    let out = dir.join("map_refined.ply");
+    let out = run.map_refined();
     write_ply_file(&map, &out).with_context(|| format!("writing {}", out.display()))?;
-    write_report_json(&dir.join("quality_refined.json"), &after)?;
+    write_report_json(&run.quality_refined(), &after)?;
     write_quality_metrics(dir, &after, "_refined")?;
     let mut extra = serde_json::Map::new();
     extra.insert("refine_iters".into(), stats.iterations.into());
@@ -177,14 +179,14 @@ pub fn run(args: RefineArgs) -> anyhow::Result<()> {
     // The unrefined map scored on the same frames, so before/after compare like for like.
     extra.insert("psnr_db_before_refine".into(), before.psnr_db.into());
     extra.insert("ssim_before_refine".into(), before.ssim.into());
-    merge_metrics_json(&dir.join("metrics.json"), extra)?;
+    merge_metrics_json(&run.metrics(), extra)?;
     println!(
         "PSNR {:.2} → {:.2} dB, SSIM {:.4} → {:.4}",
         before.psnr_db, after.psnr_db, before.ssim, after.ssim
     );
     println!("wrote {}", out.display());
-    println!("wrote {}", dir.join("quality_refined.json").display());
-    println!("wrote {}", dir.join("metrics.json").display());
+    println!("wrote {}", run.quality_refined().display());
+    println!("wrote {}", run.metrics().display());
     for p in before.pngs.iter().chain(&after.pngs) {
         println!("wrote {}", p.display());
     }
@@ -193,18 +195,8 @@ pub fn run(args: RefineArgs) -> anyhow::Result<()> {
 
 /// The run's dataset selection: run.json's `dataset_args`, or `--dataset` when given.
 fn dataset_args(run_dir: &Path, dataset_override: Option<&str>) -> anyhow::Result<DatasetArgs> {
-    let path = run_dir.join("run.json");
-    let saved = match std::fs::read_to_string(&path) {
-        Ok(text) => {
-            let json: serde_json::Value = serde_json::from_str(&text)
-                .with_context(|| format!("{}: invalid JSON", path.display()))?;
-            json.get("dataset_args")
-                .map(|v| parse_dataset_args(v).with_context(|| format!("{}", path.display())))
-                .transpose()?
-        }
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => None,
-        Err(e) => return Err(anyhow::Error::new(e).context(format!("reading {}", path.display()))),
-    };
+    let run = RunDir::new(run_dir);
+    let saved = RunRecord::read(&run)?.map(|r| r.dataset_args);
     match (saved, dataset_override) {
         (Some(mut a), Some(d)) => {
             a.dataset = d.to_string();
@@ -216,73 +208,10 @@ fn dataset_args(run_dir: &Path, dataset_override: Option<&str>) -> anyhow::Resul
             ..DatasetArgs::default()
         }),
         (None, None) => anyhow::bail!(
-            "{}: no \"dataset_args\" (a run from an older `opengs run`?); \
-             pass --dataset synthetic|tum:DIR|replica:DIR",
-            path.display()
+            "{}: no run record; pass --dataset synthetic|tum:DIR|replica:DIR",
+            run.run_record().display()
         ),
     }
-}
-
-/// `{"dataset": "...", "frames": N|null, "trajectory": "..."|null, "seed": N, "noise": bool,
-/// "scene": N, "drop_frames": R, "drop_burst": N, "speed": N, "start": S}`; only `dataset` is
-/// required.
-fn parse_dataset_args(v: &serde_json::Value) -> anyhow::Result<DatasetArgs> {
-    let field = |name: &str| v.get(name).filter(|x| !x.is_null());
-    let dataset = field("dataset")
-        .and_then(|x| x.as_str())
-        .context("\"dataset_args.dataset\" must be a string")?
-        .to_string();
-    let frames = match field("frames") {
-        None => None,
-        Some(x) => Some(
-            x.as_u64()
-                .context("\"dataset_args.frames\" must be a count")? as usize,
-        ),
-    };
-    let trajectory = match field("trajectory") {
-        None => None,
-        Some(x) => Some(PathBuf::from(
-            x.as_str()
-                .context("\"dataset_args.trajectory\" must be a path")?,
-        )),
-    };
-    let seed = match field("seed") {
-        None => 0,
-        Some(x) => x
-            .as_u64()
-            .context("\"dataset_args.seed\" must be an integer")?,
-    };
-    let noise = match field("noise") {
-        None => false,
-        Some(x) => x
-            .as_bool()
-            .context("\"dataset_args.noise\" must be true or false")?,
-    };
-    let defaults = DatasetArgs::default();
-    let count = |name: &str, default: u64| match field(name) {
-        None => Ok(default),
-        Some(x) => x
-            .as_u64()
-            .with_context(|| format!("\"dataset_args.{name}\" must be a whole number")),
-    };
-    let number = |name: &str, default: f64| match field(name) {
-        None => Ok(default),
-        Some(x) => x
-            .as_f64()
-            .with_context(|| format!("\"dataset_args.{name}\" must be a number")),
-    };
-    Ok(DatasetArgs {
-        dataset,
-        frames,
-        trajectory,
-        seed,
-        noise,
-        scene: count("scene", defaults.scene)?,
-        drop_frames: number("drop_frames", defaults.drop_frames)?,
-        drop_burst: count("drop_burst", defaults.drop_burst as u64)? as usize,
-        speed: count("speed", defaults.speed as u64)? as usize,
-        start: number("start", defaults.start)?,
-    })
 }
 
 /// `every`, raised so that at most `max_keyframes` of `poses` are used.
@@ -312,24 +241,6 @@ fn print_quality(when: &str, r: &QualityReport) {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn dataset_args_parse_defensively() {
-        let v = serde_json::json!({"dataset": "tum:/d", "frames": 30, "seed": 2, "noise": true});
-        let a = parse_dataset_args(&v).expect("valid");
-        assert_eq!(
-            (a.dataset.as_str(), a.frames, a.seed, a.noise),
-            ("tum:/d", Some(30), 2, true)
-        );
-        let a = parse_dataset_args(&serde_json::json!({"dataset": "synthetic", "frames": null}))
-            .expect("valid");
-        assert_eq!(
-            (a.frames, a.trajectory, a.seed, a.noise),
-            (None, None, 0, false)
-        );
-        let e = parse_dataset_args(&serde_json::json!({"frames": 3})).expect_err("no dataset");
-        assert!(e.to_string().contains("dataset_args.dataset"), "{e}");
-    }
 
     #[test]
     fn stride_respects_the_keyframe_cap() {

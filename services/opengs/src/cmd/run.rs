@@ -1,10 +1,12 @@
 //! `opengs run`: the main job.
 
-use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-use opengs_pipeline::consensus_stage::Ablation;
-use opengs_pipeline::{DatasetArgs, DeployFile, RunOptions, RunSummary, Supervisor};
+use opengs_pipeline::consensus_stage::{Ablation, ConsensusRunFlags};
+use opengs_pipeline::deploy::stage_names;
+use opengs_pipeline::mapper_stage::MapperRunFlags;
+use opengs_pipeline::tracker_stage::TrackerRunFlags;
+use opengs_pipeline::{DatasetArgs, DeployFile, RunOptions, RunSummary, StageFlags};
 
 /// Default replay rate of the synthetic room (frames/s).
 const SYNTHETIC_REPLAY_HZ: f64 = 10.0;
@@ -68,7 +70,7 @@ pub fn execute(args: &RunArgs) -> anyhow::Result<RunSummary> {
         let stage = deploy
             .stages
             .iter_mut()
-            .find(|s| s.name == "segmenter")
+            .find(|s| s.name == stage_names::SEGMENTER)
             .ok_or_else(|| {
                 anyhow::anyhow!(
                     "--segmenter: deploy file {} has no segmenter stage",
@@ -99,42 +101,37 @@ pub fn execute(args: &RunArgs) -> anyhow::Result<RunSummary> {
         .out
         .clone()
         .unwrap_or_else(|| Path::new("runs").join(now.format("%Y%m%d-%H%M%S").to_string()));
-    let mut stage_args = BTreeMap::new();
-    if args.gt_first_pose {
-        stage_args.insert("tracker".to_string(), vec!["--gt-first-pose".to_string()]);
-    }
-    if !args.ablation.is_empty() {
-        if !deploy.stages.iter().any(|s| s.name == "consensus") {
-            anyhow::bail!(
-                "--ablation: deploy file {} has no consensus stage",
-                args.deploy.display()
-            );
-        }
-        let flags = args
-            .ablation
-            .iter()
-            .flat_map(|a| ["--ablation".to_string(), a.as_str().to_string()])
-            .collect();
-        stage_args.insert("consensus".to_string(), flags);
+    let has_stage = |name: &str| deploy.stages.iter().any(|s| s.name == name);
+    if !args.ablation.is_empty() && !has_stage(stage_names::CONSENSUS) {
+        anyhow::bail!(
+            "--ablation: deploy file {} has no consensus stage",
+            args.deploy.display()
+        );
     }
     let finish_steps = args.finish_steps.unwrap_or(DEFAULT_FINISH_STEPS);
-    let mut finish_after_data = false;
-    if finish_steps > 0 {
-        match deploy.stages.iter().find(|s| s.name == "mapper") {
-            Some(m) if m.finish_timeout_s > 0.0 => {
-                stage_args.insert(
-                    "mapper".to_string(),
-                    vec!["--finish-steps".to_string(), finish_steps.to_string()],
-                );
-                finish_after_data = true;
-            }
-            Some(_) => eprintln!(
+    let mapper = deploy.stages.iter().find(|s| s.name == stage_names::MAPPER);
+    let finish_after_data = match mapper {
+        Some(m) if finish_steps > 0 && m.finish_timeout_s > 0.0 => true,
+        Some(_) if finish_steps > 0 => {
+            eprintln!(
                 "--finish-steps: the mapper in {} has no finish_timeout_s; no final optimisation",
                 args.deploy.display()
-            ),
-            None => {}
+            );
+            false
         }
-    }
+        _ => false,
+    };
+    let stage_flags = StageFlags {
+        tracker: TrackerRunFlags {
+            gt_first_pose: args.gt_first_pose,
+        },
+        mapper: MapperRunFlags {
+            finish_steps: if finish_after_data { finish_steps } else { 0 },
+        },
+        consensus: ConsensusRunFlags {
+            ablation: args.ablation.clone(),
+        },
+    };
     eprintln!(
         "opengs run {run_id}: dataset {}, deploy {} ({}), output {}",
         args.dataset.dataset,
@@ -142,13 +139,13 @@ pub fn execute(args: &RunArgs) -> anyhow::Result<RunSummary> {
         deploy.description,
         out_dir.display()
     );
-    Supervisor::run(RunOptions {
+    opengs_pipeline::run(RunOptions {
         deploy,
         dataset: args.dataset.clone(),
         out_dir: out_dir.clone(),
         run_id,
         max_rate,
-        stage_args,
+        stage_flags,
         progress: !args.quiet,
         quality_every: args.quality_every,
         finish_after_data,
@@ -192,7 +189,7 @@ fn print_summary(s: &RunSummary) {
     if !restarts.is_empty() {
         println!("restarts: {}", restarts.join(", "));
     }
-    if let Some(m) = &s.metrics {
+    if let Some(m) = &s.scores.metrics {
         if let (Some(rmse), Some(mean)) = (m.ate_rmse_cm, m.ate_mean_cm) {
             println!(
                 "ATE (Umeyama, no scale): RMSE {rmse:.3} cm, mean {mean:.3} cm over {} frames",
@@ -200,13 +197,13 @@ fn print_summary(s: &RunSummary) {
             );
         }
     }
-    if let Some(q) = &s.quality {
+    if let Some(q) = &s.scores.quality {
         println!(
             "render quality: PSNR {:.2} dB, SSIM {:.3}, holes {:.2} % over {} frames (valid depth only)",
             q.psnr_db, q.ssim, q.holes_pct, q.frames_evaluated
         );
     }
-    if let Some(sem) = &s.semantics {
+    if let Some(sem) = &s.scores.semantics {
         if let Some(m) = &sem.map {
             print!(
                 "labels: mIoU {:.2}, acc {:.2} over {} held-out frames",

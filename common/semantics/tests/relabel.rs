@@ -5,20 +5,23 @@ mod common;
 use common::{consensus_with, Scene};
 use opengs_semantics::{
     apply_relabels, select_counter_gaussians, ConsensusConfig, CounterPruneRegion,
-    RelabelInstruction, SemanticsError, TopKView,
+    RelabelInstruction, SemanticsError,
 };
+use opengs_splat::TopK;
 
-const K: usize = 3;
-/// Four pixels, K = 3 slots each (unused slots hold junk that must be ignored).
-const IDS: [u32; 12] = [0, 1, 2, 1, 3, 99, 4, 99, 99, 5, 99, 99];
-const COUNTS: [u8; 4] = [3, 2, 1, 1];
+/// Four pixels (a 4×1 image) and the Gaussian ids in each one's top-K, front to back.
+const LISTS: [&[u32]; 4] = [&[0, 1, 2], &[1, 3], &[4], &[5]];
 /// Gaussian labels g0..g5.
 const LABELS: [u32; 6] = [1, 1, 2, 1, 1, 1];
 /// Largest scale (metres) of g0..g5.
 const MAX_SCALE: [f32; 6] = [0.05, 0.2, 0.5, 0.11, 0.3, 0.10];
 
-fn view() -> TopKView<'static> {
-    TopKView::new(K, &COUNTS, &IDS).expect("valid view")
+fn view() -> TopK {
+    let lists: Vec<Vec<(u32, f32)>> = LISTS
+        .iter()
+        .map(|ids| ids.iter().map(|&id| (id, 0.5)).collect())
+        .collect();
+    TopK::from_lists(4, 1, &lists)
 }
 
 #[test]
@@ -138,13 +141,6 @@ fn bad_indices_are_errors_and_change_nothing() {
 }
 
 #[test]
-fn malformed_views_are_rejected() {
-    assert!(TopKView::new(3, &[1u8, 1], &[0; 5]).is_err());
-    assert!(TopKView::new(2, &[3u8], &[0; 2]).is_err());
-    assert!(TopKView::new(2, &[2u8, 0], &[0; 4]).is_ok());
-}
-
-#[test]
 fn full_match_prune_region_is_the_symmetric_difference() {
     // 20×5 grid: input 10 on pixels 0..90, rendered 1 on 5..95 → a = b = 85/90: Full.
     let mut scene = Scene::new(20, 5);
@@ -175,19 +171,4 @@ fn partial_split_applied_through_top_k() {
     let mut labels = [1, 1, 1, 1, 1, 1];
     apply_relabels(&view(), &mut labels, &out.relabels).expect("valid");
     assert_eq!(labels, [2, 2, 2, 1, 1, 1]);
-}
-
-#[test]
-fn u16_counts_work_too() {
-    let counts: [u16; 2] = [2, 1];
-    let ids = [0u32, 1, 2, 9];
-    let view = TopKView::new(2, &counts, &ids).expect("valid");
-    let mut labels = [4u32, 4, 4];
-    let relabels = [RelabelInstruction {
-        from: 4,
-        to: 5,
-        pixels: vec![0, 1],
-    }];
-    assert_eq!(apply_relabels(&view, &mut labels, &relabels), Ok(3));
-    assert_eq!(labels, [5, 5, 5]);
 }

@@ -188,6 +188,32 @@ impl TopK {
         heaviest_first(&entries, entries.len())
     }
 
+    /// Number of pixels (row-major indices `0..pixel_count()`).
+    pub fn pixel_count(&self) -> usize {
+        self.count.len()
+    }
+
+    /// Row-major pixel `index`'s entries, front to back; none when out of range (indices
+    /// come from messages, so they are not trusted).
+    pub fn entries_at(&self, index: usize) -> impl Iterator<Item = (u32, f32)> + '_ {
+        // An index in range means a width of at least 1.
+        let w = self.width as usize;
+        (index < self.count.len())
+            .then(|| self.pixel((index % w) as u32, (index / w) as u32))
+            .into_iter()
+            .flatten()
+    }
+
+    /// Gaussian ids at row-major pixel `index`, front to back (none when out of range).
+    pub fn gaussians_at(&self, index: usize) -> impl Iterator<Item = u32> + '_ {
+        self.entries_at(index).map(|e| e.0)
+    }
+
+    /// Weight α·T of Gaussian `id` at row-major pixel `index`, if it is in that pixel's top-K.
+    pub fn weight_of(&self, index: usize, id: u32) -> Option<f32> {
+        self.entries_at(index).find(|e| e.0 == id).map(|e| e.1)
+    }
+
     /// Total number of (id, weight) entries.
     pub fn entries(&self) -> usize {
         self.count.iter().map(|&c| c as usize).sum()
@@ -385,5 +411,56 @@ mod tests {
         assert_eq!(stored_weight(0.5), 0.5);
         assert!(stored_weight(lo) > 0.0);
         assert!(stored_weight(0.3) < stored_weight(0.31));
+    }
+
+    #[test]
+    fn remap_drops_removed_and_renumbers() {
+        let mut t = TopK::from_lists(
+            2,
+            1,
+            &[
+                vec![(0, 0.5), (2, 0.25), (3, 0.125)],
+                vec![(1, 0.5), (3, 0.375)],
+            ],
+        );
+        // Gaussians 0 and 3 removed: 1 → 0, 2 → 1.
+        t.remap(&[None, Some(0), Some(1), None]);
+        assert_eq!(t.gaussians_at(0).collect::<Vec<_>>(), [1]);
+        assert_eq!(t.gaussians_at(1).collect::<Vec<_>>(), [0]);
+        assert_eq!(t.entries(), 2);
+        assert_eq!(t.gaussians_at(2).count(), 0);
+        assert_eq!(t.weight_of(0, 1), Some(0.25));
+        assert_eq!(t.weight_of(1, 0), Some(0.5));
+        assert_eq!(t.weight_of(1, 1), None);
+    }
+
+    #[test]
+    fn lists_of_every_band_are_found_and_remapped() {
+        // 3×40 pixels: three 16-row bands, the last one partial. Pixel p lists p % 7 ids,
+        // weights in eighths (f16 holds them exactly).
+        let lists: Vec<Vec<(u32, f32)>> = (0..120u32)
+            .map(|p| (0..p % 7).map(|i| (p + i, (i + 1) as f32 / 8.0)).collect())
+            .collect();
+        let mut t = TopK::from_lists(3, 40, &lists);
+        assert_eq!(t.pixel_count(), 120);
+        assert_eq!(t.entries(), lists.iter().map(Vec::len).sum::<usize>());
+        for (p, list) in lists.iter().enumerate() {
+            let ids: Vec<u32> = list.iter().map(|e| e.0).collect();
+            assert_eq!(t.gaussians_at(p).collect::<Vec<_>>(), ids, "pixel {p}");
+        }
+        assert_eq!(t.weight_of(104, 106), Some(0.375));
+        // Odd ids removed, even ones halved.
+        let old_to_new: Vec<Option<u32>> =
+            (0..130u32).map(|i| (i % 2 == 0).then_some(i / 2)).collect();
+        t.remap(&old_to_new);
+        for (p, list) in lists.iter().enumerate() {
+            let ids: Vec<u32> = list
+                .iter()
+                .filter(|e| e.0 % 2 == 0)
+                .map(|e| e.0 / 2)
+                .collect();
+            assert_eq!(t.gaussians_at(p).collect::<Vec<_>>(), ids, "pixel {p}");
+        }
+        assert_eq!(t.weight_of(104, 53), Some(0.375));
     }
 }

@@ -1,0 +1,169 @@
+//! One run of the pipeline, start to finish: the [`Supervisor`] runs the stages and hands back
+//! what it collected; [`run_outputs`](crate::run_outputs) writes it into the run directory
+//! (nothing collected is lost, whatever ended the run); [`scoring`](crate::scoring) scores the
+//! result against the dataset's ground truth.
+
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+use std::time::Instant;
+
+use opengs_eval::RunDir;
+use opengs_telemetry::LatencyReport;
+
+use crate::consensus_stage::ConsensusRunFlags;
+use crate::deploy::{stage_names, DeployFile};
+use crate::mapper_stage::MapperRunFlags;
+use crate::recorder::Recorder;
+use crate::scoring::Scores;
+use crate::supervisor::{Ending, Supervisor};
+use crate::tracker_stage::TrackerRunFlags;
+use crate::DatasetArgs;
+
+/// Everything `opengs run` decides before the stages start.
+pub struct RunOptions {
+    pub deploy: DeployFile,
+    pub dataset: DatasetArgs,
+    pub out_dir: PathBuf,
+    pub run_id: String,
+    /// Sensor pacing (`None` = dataset rate, 0 = as fast as possible).
+    pub max_rate: Option<f64>,
+    /// Flags the run sets on individual stages, beyond their deploy-file arguments.
+    pub stage_flags: StageFlags,
+    /// Show a progress bar / periodic progress lines.
+    pub progress: bool,
+    /// Score rendered views against every Nth frame at the end (0 = skip).
+    pub quality_every: usize,
+    /// At the end of the data, let stages with a `finish_timeout_s` do their final work
+    /// (else every stage is stopped at once).
+    pub finish_after_data: bool,
+}
+
+/// Flags a run sets on individual stages, each typed by the stage's own argument struct.
+#[derive(Debug, Clone, Default)]
+pub struct StageFlags {
+    pub tracker: TrackerRunFlags,
+    pub mapper: MapperRunFlags,
+    pub consensus: ConsensusRunFlags,
+}
+
+impl StageFlags {
+    /// The arguments for the stage called `name` in the deploy file.
+    pub fn for_stage(&self, name: &str) -> Vec<String> {
+        match name {
+            stage_names::TRACKER => self.tracker.to_args(),
+            stage_names::MAPPER => self.mapper.to_args(),
+            stage_names::CONSENSUS => self.consensus.to_args(),
+            _ => Vec::new(),
+        }
+    }
+}
+
+/// What a finished run produced.
+pub struct RunSummary {
+    pub out_dir: PathBuf,
+    pub frames_published: u64,
+    pub poses: usize,
+    pub keyframes: usize,
+    /// Frames without a verified pose, and relocalisations after them.
+    pub lost_frames: usize,
+    pub relocalisations: usize,
+    pub elapsed_s: f64,
+    /// Seconds until the data ended (or the run stopped), without the stages' final work.
+    pub streaming_s: f64,
+    pub latency: LatencyReport,
+    pub restarts: BTreeMap<String, u32>,
+    pub interrupted: bool,
+    /// Files of this run still in /dev/shm or the iceoryx2 root after shutdown (should be none).
+    pub leftover_files: Vec<PathBuf>,
+    pub recorder: Recorder,
+    pub scores: Scores,
+}
+
+/// Runs the pipeline as `opts` say, writes the run directory and scores it. A stage that
+/// failed for good is an error, reported after the outputs so far are written.
+pub fn run(opts: RunOptions) -> anyhow::Result<RunSummary> {
+    let started = Instant::now();
+    let supervised = Supervisor::supervise(&opts)?;
+    let run_dir = RunDir::new(&opts.out_dir);
+    // Outputs are written on every path: nothing produced is lost.
+    crate::run_outputs::write(&run_dir, &opts, &supervised)?;
+    let scores = crate::scoring::score(&run_dir, &opts, !supervised.recorder.is_empty());
+    let summary = RunSummary {
+        out_dir: opts.out_dir.clone(),
+        frames_published: supervised.processed(stage_names::SENSOR),
+        poses: supervised.recorder.len(),
+        keyframes: supervised.recorder.keyframes(),
+        lost_frames: supervised.recorder.lost(),
+        relocalisations: supervised.recorder.relocalised(),
+        elapsed_s: started.elapsed().as_secs_f64(),
+        streaming_s: supervised.streaming_s,
+        latency: supervised.profile.report(),
+        restarts: supervised
+            .stages
+            .iter()
+            .map(|s| (s.name.clone(), s.restarts))
+            .collect(),
+        interrupted: matches!(supervised.ending, Ok(Ending::Interrupted)),
+        leftover_files: supervised.leftover_files,
+        recorder: supervised.recorder,
+        scores,
+    };
+    match supervised.ending? {
+        Ending::StageFailed(why) => Err(anyhow::anyhow!(
+            "{why}; outputs so far are in {}",
+            opts.out_dir.display()
+        )),
+        _ => Ok(summary),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use clap::Parser;
+
+    use super::*;
+    use crate::consensus_stage::{Ablation, ConsensusArgs};
+    use crate::mapper_stage::MapperArgs;
+    use crate::tracker_stage::TrackerArgs;
+
+    fn parse<A: clap::Args>(args: &[String]) -> A {
+        #[derive(Parser)]
+        struct Cli<A: clap::Args> {
+            #[command(flatten)]
+            a: A,
+        }
+        let argv = std::iter::once("stage".to_string()).chain(args.iter().cloned());
+        Cli::<A>::try_parse_from(argv)
+            .expect("the stage parses what the run wrote")
+            .a
+    }
+
+    #[test]
+    fn each_stage_reads_back_the_flags_the_run_sets() {
+        let flags = StageFlags {
+            tracker: TrackerRunFlags {
+                gt_first_pose: true,
+            },
+            mapper: MapperRunFlags { finish_steps: 250 },
+            consensus: ConsensusRunFlags {
+                ablation: vec![Ablation::NoPartDecay, Ablation::NoCounterPruning],
+            },
+        };
+        let tracker: TrackerArgs = parse(&flags.for_stage(stage_names::TRACKER));
+        assert_eq!(tracker.run, flags.tracker);
+        let mapper: MapperArgs = parse(&flags.for_stage(stage_names::MAPPER));
+        assert_eq!(mapper.run, flags.mapper);
+        let consensus: ConsensusArgs = parse(&flags.for_stage(stage_names::CONSENSUS));
+        assert_eq!(consensus.run, flags.consensus);
+        // Defaults write nothing, so a deploy file's own arguments stand alone.
+        let none = StageFlags::default();
+        for name in [
+            stage_names::TRACKER,
+            stage_names::MAPPER,
+            stage_names::CONSENSUS,
+        ] {
+            assert!(none.for_stage(name).is_empty(), "{name}");
+        }
+        assert!(flags.for_stage(stage_names::SEGMENTER).is_empty());
+    }
+}

@@ -1,0 +1,58 @@
+//! The relabel step of METHOD.md §4, through a render's G_topK ([`TopK`]).
+
+use opengs_splat::TopK;
+
+use crate::error::{Result, SemanticsError};
+use crate::output::RelabelInstruction;
+
+/// Checks every pixel of `regions` and every Gaussian id recorded there (against a map of
+/// `gaussians`), so a caller can validate before it changes anything.
+pub fn validate_regions<'p>(
+    top_k: &TopK,
+    gaussians: usize,
+    regions: impl Iterator<Item = &'p [u32]>,
+) -> Result<()> {
+    let pixels = top_k.pixel_count();
+    for region in regions {
+        for &p in region {
+            if p as usize >= pixels {
+                return Err(SemanticsError::PixelOutOfRange { pixel: p, pixels });
+            }
+            if let Some(id) = top_k
+                .gaussians_at(p as usize)
+                .find(|&id| id as usize >= gaussians)
+            {
+                return Err(SemanticsError::GaussianOutOfRange { id, gaussians });
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Applies relabel instructions in order: in each listed pixel's top-K, a Gaussian labelled
+/// `from` gets `to`. Validates everything first, so on error no label changed.
+/// Returns how many label writes happened.
+pub fn apply_relabels(
+    top_k: &TopK,
+    labels: &mut [u32],
+    relabels: &[RelabelInstruction],
+) -> Result<usize> {
+    validate_regions(
+        top_k,
+        labels.len(),
+        relabels.iter().map(|r| r.pixels.as_slice()),
+    )?;
+    let mut changed = 0;
+    for instruction in relabels {
+        for &p in &instruction.pixels {
+            for id in top_k.gaussians_at(p as usize) {
+                let label = &mut labels[id as usize]; // in range: validated above
+                if *label == instruction.from && instruction.from != instruction.to {
+                    *label = instruction.to;
+                    changed += 1;
+                }
+            }
+        }
+    }
+    Ok(changed)
+}
