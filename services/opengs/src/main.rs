@@ -32,6 +32,8 @@ enum Command {
     Synth(cmd::synth::SynthArgs),
     /// Render colour, depth and labels of a Gaussian map (PLY) at a pose.
     Render(cmd::render::RenderArgs),
+    /// Objects of a finished map: list, pick, extract, remove, move, rotate, render-edit.
+    Objects(cmd::objects::ObjectsArgs),
     /// Keep optimising a finished run's map offline; report PSNR/SSIM before and after.
     Refine(cmd::refine::RefineArgs),
     /// Register two point clouds (PLY or `x y z` text) with G-ICP.
@@ -56,6 +58,7 @@ fn main() -> ExitCode {
         Command::Profile(a) => cmd::profile::run(a),
         Command::Synth(a) => cmd::synth::run(a),
         Command::Render(a) => cmd::render::run(a),
+        Command::Objects(a) => cmd::objects::run(a),
         Command::Refine(a) => cmd::refine::run(a),
         Command::Register(a) => cmd::register::run(a),
         Command::Models(a) => cmd::models::run(a),

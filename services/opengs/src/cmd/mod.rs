@@ -8,6 +8,7 @@ pub mod bench_slam;
 pub mod ctl;
 pub mod eval;
 pub mod models;
+pub mod objects;
 pub mod profile;
 pub mod refine;
 pub mod register;
