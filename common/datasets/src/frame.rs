@@ -29,6 +29,36 @@ impl RgbdFrame {
         let d = *self.depth.get((v * self.width + u) as usize)?;
         (d != 0).then(|| d as f32 / self.depth_scale)
     }
+
+    /// Depth in metres, 0 where missing.
+    pub fn depth_metres(&self) -> Vec<f32> {
+        let k = 1.0 / self.depth_scale;
+        self.depth.iter().map(|&d| d as f32 * k).collect()
+    }
+
+    /// Checks that the buffers match the frame's size and the camera's (frames are external
+    /// input); the error says what does not match.
+    pub fn check_buffers(&self, intrinsics: &Intrinsics) -> Result<(), String> {
+        let (w, h) = (self.width, self.height);
+        if (w, h) != (intrinsics.width, intrinsics.height) {
+            return Err(format!(
+                "image is {w}x{h} but the camera is {}x{}",
+                intrinsics.width, intrinsics.height
+            ));
+        }
+        let n = w as usize * h as usize;
+        if self.rgb.len() != 3 * n || self.depth.len() != n {
+            return Err(format!(
+                "{} RGB bytes and {} depth values for {w}x{h}",
+                self.rgb.len(),
+                self.depth.len()
+            ));
+        }
+        if !(self.depth_scale.is_finite() && self.depth_scale > 0.0) {
+            return Err(format!("depth scale {} ≤ 0", self.depth_scale));
+        }
+        Ok(())
+    }
 }
 
 /// Instance id → class name entry of a dataset's ground-truth class table.

@@ -52,7 +52,7 @@ impl Default for MapperConfig {
             loss: LossWeights::default(),
             trackable_opacity: 0.09,
             scene_extent: 0.1,
-            near: 0.05,
+            near: opengs_splat::DEFAULT_NEAR,
             seed: 0,
         }
     }

@@ -6,18 +6,31 @@
 //! each segmented keyframe, and the consensus result (relabels, labels for new Gaussians,
 //! counter pruning) applied through it. [`Mapper`] holds both; the dependency runs one way
 //! (`mapper` → `semantic`).
+//!
+//! Training beyond the online loop: [`refine`] (more full-resolution steps with 3DGS
+//! [splitting](split_largest_gradients) and pruning on a run's keyframes, `opengs refine`)
+//! and the mapper's final optimisation at the end of the data ([`optimise_final`] on the
+//! [`KeptKeyframes`], then [`fill_holes`]).
 
 mod config;
 mod densify;
+mod final_optimisation;
 mod keyframe;
 mod mapper;
+mod refine;
+mod scene_extent;
 mod semantic;
+mod splitting;
 
 pub use config::MapperConfig;
 pub use densify::{gaussians_for_holes, gaussians_from_points, DensifyInput, HoleFilling};
+pub use final_optimisation::{fill_holes, optimise_final, KeptKeyframes};
 pub use keyframe::StoredKeyframe;
 pub use mapper::{Mapper, TrackableGaussians};
+pub use refine::{refine, target_frame, RefineConfig, RefineError, RefineStats};
+pub use scene_extent::scene_extent;
 pub use semantic::{
     ConsensusApplied, ConsensusApplyError, ConsensusUpdate, KeyframeRender, LabelVisibility,
     PendingRenders, SemanticLoop, MAX_PENDING_RENDERS,
 };
+pub use splitting::{split_largest_gradients, GradientStats};

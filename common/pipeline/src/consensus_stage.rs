@@ -262,7 +262,11 @@ impl ConsensusStage {
             out.relabels.len(),
             out.counter_pruning.len()
         );
-        if let Err(e) = save_table(&self.out_dir, self.consensus.table()) {
+        if let Err(e) = self
+            .consensus
+            .table()
+            .save(&RunDir::new(&self.out_dir).label_table())
+        {
             tracing::error!("saving the label table: {e:#}");
         }
         self.telemetry.processed(&seg.stamp, start, now_ns());
@@ -346,26 +350,6 @@ impl WireResult {
     }
 }
 
-fn save_table(out_dir: &Path, table: &GlobalLabelTable) -> anyhow::Result<()> {
-    let path = RunDir::new(out_dir).label_table();
-    let tmp = path.with_extension("json.tmp");
-    std::fs::write(&tmp, serde_json::to_vec_pretty(table)?)?;
-    std::fs::rename(&tmp, &path)?;
-    Ok(())
-}
-
-/// The global table saved by a consensus stage in `run_dir`, if any.
-pub fn load_label_table(run_dir: &Path) -> anyhow::Result<Option<GlobalLabelTable>> {
-    let path = RunDir::new(run_dir).label_table();
-    if !path.exists() {
-        return Ok(None);
-    }
-    let text = std::fs::read_to_string(&path)?;
-    let table =
-        serde_json::from_str(&text).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
-    Ok(Some(table))
-}
-
 /// Runs the consensus stage until a termination signal.
 pub fn run_consensus(ctx: &RunContext, out_dir: &Path, args: &ConsensusArgs) -> anyhow::Result<()> {
     let config = args.config()?;
@@ -381,7 +365,7 @@ pub fn run_consensus(ctx: &RunContext, out_dir: &Path, args: &ConsensusArgs) -> 
         on(config.enable_confidence_update),
         on(config.enable_part_decay)
     );
-    let consensus = match load_label_table(out_dir)? {
+    let consensus = match GlobalLabelTable::load(&RunDir::new(out_dir).label_table())? {
         Some(table) => {
             tracing::info!("resuming with {} global labels", table.len());
             LabelConsensus::with_table(config, table)?
@@ -428,7 +412,8 @@ pub fn run_consensus(ctx: &RunContext, out_dir: &Path, args: &ConsensusArgs) -> 
         }
         stage.run_joined()?;
     }
-    save_table(out_dir, stage.consensus.table())?;
+    let table_path = RunDir::new(out_dir).label_table();
+    stage.consensus.table().save(&table_path)?;
     tracing::info!("consensus: {} global labels", stage.consensus.table().len());
     Ok(())
 }

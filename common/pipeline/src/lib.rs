@@ -6,10 +6,8 @@
 pub mod consensus_stage;
 pub mod dataset_args;
 pub mod deploy;
-pub mod final_optimisation;
 pub mod logging;
 pub mod mapper_stage;
-pub mod metrics;
 pub mod progress;
 pub mod recorder;
 pub mod run;
@@ -17,7 +15,6 @@ pub mod run_outputs;
 pub mod run_record;
 pub mod scoring;
 pub mod segmenter_stage;
-pub mod semantic_eval;
 pub mod sensor;
 pub mod stage_main;
 pub mod stage_process;

@@ -16,14 +16,16 @@ use opengs_ipc_schema::{
     now_ns, ConsensusHeader, KeyframeHeader, LabelCompleteness, MapTargetHeader, MapTargetParts,
     MessageKind, RenderHeader, SegmentsHeader, Stamp,
 };
-use opengs_mapping::{ConsensusUpdate, DensifyInput, Mapper, MapperConfig, StoredKeyframe};
+use opengs_mapping::{
+    fill_holes, optimise_final, ConsensusUpdate, DensifyInput, KeptKeyframes, Mapper, MapperConfig,
+    StoredKeyframe,
+};
 use opengs_runtime::{
     waitset, CallbackProgression, Inlet, Outlet, RunContext, TelemetrySink, WaitSetRunResult,
 };
 use opengs_semantics::{CounterPruneRegion, RelabelInstruction};
 use opengs_splat::{read_ply_file, write_ply_file, Camera, GaussianMap};
 
-use crate::final_optimisation::{fill_holes, optimise_final, KeptKeyframes};
 use opengs_runtime::finish_requested_flag;
 
 /// The mapper's flags that `opengs run` sets ([`crate::run::StageFlags`]); one struct for
@@ -494,9 +496,10 @@ pub fn run_mapper(ctx: &RunContext, out_dir: &Path, args: &MapperArgs) -> anyhow
                     stop.store(true, Ordering::Relaxed);
                 }
             }
-            worker
+            let result = worker
                 .join()
-                .map_err(|_| anyhow::anyhow!("the final optimisation panicked"))?
+                .map_err(|_| anyhow::anyhow!("the final optimisation panicked"))?;
+            anyhow::Ok(result?)
         })?;
         let done = finish_stats.as_ref().map_or(0, |s| s.iterations);
         telemetry.progress(done as u32, steps as u32);

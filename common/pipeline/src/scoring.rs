@@ -6,9 +6,9 @@ use std::path::Path;
 
 use opengs_eval::RunDir;
 
-use crate::metrics::RunMetrics;
+use opengs_quality::{RunMetrics, SemanticReport};
+
 use crate::run::RunOptions;
-use crate::semantic_eval::SemanticReport;
 
 /// What could be scored.
 #[derive(Debug, Default)]
@@ -23,7 +23,7 @@ pub fn score(run: &RunDir, opts: &RunOptions, has_poses: bool) -> Scores {
     if !has_poses {
         return Scores::default();
     }
-    let metrics = crate::metrics::evaluate_run(run.root())
+    let metrics = opengs_quality::evaluate_run_trajectory(run.root())
         .map_err(|e| eprintln!("metrics: {e:#}"))
         .ok();
     // Scores need the map, poses, and a dataset with ground truth to compare with.
@@ -41,7 +41,7 @@ pub fn score(run: &RunDir, opts: &RunOptions, has_poses: bool) -> Scores {
         opts,
         scorable,
         "labels (mIoU)",
-        crate::semantic_eval::evaluate_run_semantics,
+        opengs_quality::evaluate_run_semantics,
     );
     Scores {
         metrics,

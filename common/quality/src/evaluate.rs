@@ -10,9 +10,8 @@ use crate::frame_images::{check_frame, valid_depth_mask};
 use crate::report::{FrameQuality, QualityReport, HOLE_SILHOUETTE};
 use crate::side_by_side::write_side_by_side_png;
 use crate::{psnr_masked, ssim_masked, QualityError};
+use opengs_splat::DEFAULT_NEAR;
 
-/// Near plane of evaluation renders (the mapper's default, METHOD §2).
-pub const DEFAULT_NEAR: f32 = 0.05;
 /// Side-by-side PNGs written per evaluation, evenly spread over the evaluated frames.
 pub const MAX_PNGS: usize = 4;
 

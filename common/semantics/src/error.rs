@@ -27,6 +27,8 @@ pub enum SemanticsError {
     InvalidCompleteness { label: u32, value: f32 },
     #[error("global label table is full ({cap} labels)")]
     LabelTableFull { cap: usize },
+    #[error("{path}: {message}")]
+    TableFile { path: String, message: String },
     #[error("pixel index {pixel} is outside the top-K record of {pixels} pixels")]
     PixelOutOfRange { pixel: u32, pixels: usize },
     #[error("Gaussian id {id} in the top-K record is outside the {gaussians} Gaussians")]

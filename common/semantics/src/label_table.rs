@@ -7,6 +7,7 @@
 //! with confidence 0 and class `None`; adoption ignores the cap but counts towards it.
 
 use std::collections::BTreeMap;
+use std::path::Path;
 
 use serde::{Deserialize, Serialize};
 
@@ -46,6 +47,35 @@ pub struct GlobalLabelTable {
 }
 
 impl GlobalLabelTable {
+    /// The table saved at `path` (`label_table.json` of a run); `Ok(None)` when there is none.
+    pub fn load(path: &Path) -> Result<Option<Self>> {
+        let file_error = |message: String| SemanticsError::TableFile {
+            path: path.display().to_string(),
+            message,
+        };
+        let text = match std::fs::read_to_string(path) {
+            Ok(t) => t,
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+            Err(e) => return Err(file_error(e.to_string())),
+        };
+        serde_json::from_str(&text)
+            .map(Some)
+            .map_err(|e| file_error(e.to_string()))
+    }
+
+    /// Saves the table to `path` atomically (a reader never sees half a table).
+    pub fn save(&self, path: &Path) -> Result<()> {
+        let file_error = |message: String| SemanticsError::TableFile {
+            path: path.display().to_string(),
+            message,
+        };
+        let text = serde_json::to_vec_pretty(self).map_err(|e| file_error(e.to_string()))?;
+        let tmp = path.with_extension("json.tmp");
+        std::fs::write(&tmp, text)
+            .and_then(|()| std::fs::rename(&tmp, path))
+            .map_err(|e| file_error(e.to_string()))
+    }
+
     /// Empty table that allocates at most `cap` labels.
     pub fn new(cap: usize) -> Self {
         Self {

@@ -2,6 +2,9 @@
 
 use opengs_geometry::{Intrinsics, Pose};
 
+/// Near plane (m) of mapping, evaluation and `opengs render` cameras (METHOD §2).
+pub const DEFAULT_NEAR: f32 = 0.05;
+
 /// Everything the projection needs about a view.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Camera {

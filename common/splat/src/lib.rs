@@ -48,7 +48,7 @@ pub use adam::{Adam, AdamConfig};
 pub use backward::Backward;
 pub use bin::{bin_and_sort, TileBins};
 pub use blend::{alpha_of, exp_approx, gaussian_power, MAX_ALPHA, MIN_ALPHA, MIN_TRANSMITTANCE};
-pub use camera::Camera;
+pub use camera::{Camera, DEFAULT_NEAR};
 pub use grads::MapGrads;
 pub use loss::{Loss, LossValue, LossWeights};
 pub use map::{

@@ -11,7 +11,7 @@ pub struct EvalArgs {
 }
 
 pub fn run(args: EvalArgs) -> anyhow::Result<()> {
-    let m = opengs_pipeline::metrics::evaluate_run(&args.run_dir)?;
+    let m = opengs_quality::evaluate_run_trajectory(&args.run_dir)?;
     match (m.ate_rmse_cm, m.ate_mean_cm, m.ate_max_cm) {
         (Some(rmse), Some(mean), Some(max)) => {
             println!("frames        {}", m.frames);

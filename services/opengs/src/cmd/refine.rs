@@ -11,10 +11,11 @@ use indicatif::{ProgressBar, ProgressStyle};
 use opengs_datasets::open_dataset;
 use opengs_eval::read_tum_trajectory;
 use opengs_eval::RunDir;
+use opengs_mapping::{refine, RefineConfig};
 use opengs_pipeline::{DatasetArgs, RunRecord};
 use opengs_quality::{
-    evaluate_dataset_quality, load_posed_frames, merge_metrics_json, refine, write_quality_metrics,
-    write_report_json, QualityReport, RefineConfig,
+    evaluate_dataset_quality, load_posed_frames, merge_metrics_json, write_quality_metrics,
+    write_report_json, QualityReport,
 };
 use opengs_splat::{read_ply_file, write_ply_file};
 

@@ -9,9 +9,11 @@ use std::time::Instant;
 
 use opengs_datasets::RgbdFrame;
 use opengs_geometry::{Intrinsics, Pose};
-use opengs_mapping::{gaussians_for_holes, DensifyInput, MapperConfig};
-use opengs_quality::{refine, RefineConfig, RefineStats};
 use opengs_splat::{downscale_camera2, Camera, GaussianMap};
+
+use crate::densify::{gaussians_for_holes, DensifyInput};
+use crate::refine::{refine, RefineConfig, RefineStats};
+use crate::MapperConfig;
 
 /// Full-resolution keyframes kept for the final optimisation (RGB8 and raw depth: about
 /// 1.5 MB per 640×480 keyframe). Past `max` keyframes every other one is dropped, so the
@@ -85,7 +87,7 @@ impl KeptKeyframes {
 
 /// Closes what the final optimisation's pruning opened: the depth each kept keyframe sees
 /// that the map, rendered there (at half resolution), leaves open becomes new Gaussians
-/// ([`opengs_mapping::HoleFilling`]). Returns how many were added.
+/// ([`crate::HoleFilling`]). Returns how many were added.
 pub fn fill_holes(map: &mut GaussianMap, kept: &KeptKeyframes, config: &MapperConfig) -> usize {
     let Some(k) = kept.intrinsics else {
         return 0;
@@ -125,7 +127,7 @@ pub fn optimise_final(
     steps: usize,
     near: f32,
     progress: impl FnMut(usize, f32) -> ControlFlow<()>,
-) -> anyhow::Result<Option<RefineStats>> {
+) -> Result<Option<RefineStats>, crate::RefineError> {
     let Some(k) = kept.intrinsics else {
         return Ok(None);
     };

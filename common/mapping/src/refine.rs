@@ -1,6 +1,6 @@
 //! Offline refinement of a finished map: more Adam steps of the mapping loss (METHOD §8) on
 //! a run's keyframes in random order, with periodic pruning and, in the first half,
-//! splitting of the Gaussians with the largest positional gradients ([`crate::densify`]).
+//! splitting of the Gaussians with the largest positional gradients ([`crate::splitting`]).
 
 use std::ops::ControlFlow;
 use std::time::Instant;
@@ -9,17 +9,25 @@ use opengs_datasets::RgbdFrame;
 use opengs_geometry::{Intrinsics, Pose};
 use opengs_splat::{
     downscale_camera2, prune, train_step, Adam, AdamConfig, Camera, GaussianMap, LossWeights,
-    PruneConfig, TrainConfig, TrainWorkspace,
+    PruneConfig, TargetFrame, TrainConfig, TrainWorkspace, DEFAULT_NEAR,
 };
 use rand::seq::SliceRandom;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use serde::Serialize;
 
-use crate::densify::{split_largest_gradients, GradientStats};
-use crate::frame_images::{check_frame, target_frame};
 use crate::scene_extent::scene_extent;
-use crate::QualityError;
+use crate::splitting::{split_largest_gradients, GradientStats};
+
+/// Why a refinement could not start.
+#[derive(Debug, thiserror::Error)]
+pub enum RefineError {
+    #[error("no keyframes to refine on")]
+    NoKeyframes,
+    /// A keyframe whose buffers do not match its size or the camera's.
+    #[error("frame {index}: {message}")]
+    Frame { index: usize, message: String },
+}
 
 /// How to refine.
 #[derive(Debug, Clone, PartialEq)]
@@ -55,7 +63,7 @@ impl Default for RefineConfig {
             densify_every: 250,
             densify_fraction: 0.1,
             final_mean_lr: 0.01,
-            near: crate::DEFAULT_NEAR,
+            near: DEFAULT_NEAR,
             loss: LossWeights::default(),
             min_scene_extent: 1.0,
         }
@@ -89,14 +97,17 @@ pub fn refine(
     intrinsics: Intrinsics,
     config: &RefineConfig,
     mut progress: impl FnMut(usize, f32) -> ControlFlow<()>,
-) -> Result<RefineStats, QualityError> {
+) -> Result<RefineStats, RefineError> {
     if keyframes.is_empty() {
-        return Err(QualityError::NoFrames {
-            reason: "no keyframes to refine on".into(),
-        });
+        return Err(RefineError::NoKeyframes);
     }
     for (frame, _) in keyframes {
-        check_frame(frame, &intrinsics)?;
+        frame
+            .check_buffers(&intrinsics)
+            .map_err(|message| RefineError::Frame {
+                index: frame.index,
+                message,
+            })?;
     }
     let t0 = Instant::now();
     let extent = scene_extent(keyframes.iter().map(|(_, p)| *p), config.min_scene_extent);
@@ -191,4 +202,14 @@ pub fn refine(
         last_loss: mean(&losses[losses.len().saturating_sub(tenth)..]),
         seconds: t0.elapsed().as_secs_f64(),
     })
+}
+
+/// `frame` as a training target at full resolution (its buffers checked first).
+pub fn target_frame(frame: &RgbdFrame) -> TargetFrame {
+    let rgb: Vec<[u8; 3]> = frame
+        .rgb
+        .chunks_exact(3)
+        .map(|p| [p[0], p[1], p[2]])
+        .collect();
+    TargetFrame::from_rgb8(frame.width, frame.height, &rgb, &frame.depth_metres())
 }

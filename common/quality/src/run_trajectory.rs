@@ -23,7 +23,7 @@ pub struct RunMetrics {
 }
 
 /// Computes the metrics of `run_dir` and writes `metrics.json`.
-pub fn evaluate_run(run_dir: &Path) -> anyhow::Result<RunMetrics> {
+pub fn evaluate_run_trajectory(run_dir: &Path) -> anyhow::Result<RunMetrics> {
     let run = RunDir::new(run_dir);
     let traj_path = run.trajectory();
     let estimated = read_tum_trajectory(&traj_path)?;
@@ -55,6 +55,6 @@ pub fn evaluate_run(run_dir: &Path) -> anyhow::Result<RunMetrics> {
     let serde_json::Value::Object(entries) = serde_json::to_value(&metrics)? else {
         anyhow::bail!("metrics did not serialise to an object");
     };
-    opengs_quality::merge_metrics_json(&run.metrics(), entries)?;
+    crate::merge_metrics_json(&run.metrics(), entries)?;
     Ok(metrics)
 }

@@ -11,11 +11,11 @@ use image::{ImageBuffer, Rgb};
 use opengs_datasets::{RgbdFrame, RgbdSource};
 use opengs_eval::RunDir;
 use opengs_eval::{read_label_png, read_tum_trajectory, LabelConfusion, SegmentationScore};
-use opengs_quality::{merge_metrics_json, png_positions, read_map, FrameMatcher, DEFAULT_NEAR};
-use opengs_splat::{label_color, render, Camera, GaussianMap, RenderRequest};
+use opengs_semantics::GlobalLabelTable;
+use opengs_splat::{label_color, render, Camera, GaussianMap, RenderRequest, DEFAULT_NEAR};
 use serde::Serialize;
 
-use crate::consensus_stage::load_label_table;
+use crate::{merge_metrics_json, png_positions, read_map, FrameMatcher};
 
 /// Label-map PNGs written per run (evenly spread over the scored frames).
 const LABEL_PNGS: usize = 6;
@@ -42,7 +42,7 @@ pub fn evaluate_run_semantics(
     let run = RunDir::new(run_dir);
     let map = read_map(&run.map())?;
     let counts = map.count_per_label();
-    let labels = match load_label_table(run_dir)? {
+    let labels = match GlobalLabelTable::load(&run.label_table())? {
         Some(table) => {
             let records = table.records(|id| counts.get(&id).copied().unwrap_or(0) as u64);
             std::fs::write(run.labels(), serde_json::to_string_pretty(&records)? + "\n")?;

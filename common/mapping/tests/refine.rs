@@ -1,0 +1,120 @@
+//! Offline refinement on a small synthetic room: it raises the PSNR of a perturbed map and
+//! stops when its caller says so.
+
+use std::ops::ControlFlow;
+
+use opengs_datasets::{RgbdFrame, RgbdSource, SyntheticOptions, SyntheticSource};
+use opengs_geometry::{Intrinsics, Pose};
+use opengs_mapping::{refine, RefineConfig};
+use opengs_quality::evaluate_render_quality;
+use opengs_splat::{Gaussian, GaussianMap};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+/// The synthetic room at 80×60 (the default 640×480 camera scaled by 1/8).
+fn small_room() -> SyntheticSource {
+    let mut o = SyntheticOptions::default();
+    o.intrinsics = o.intrinsics.scaled(0.125);
+    o.frames = Some(40);
+    SyntheticSource::new(o).expect("synthetic room")
+}
+
+/// One opaque isotropic Gaussian per pixel with depth, about a pixel wide, in its colour.
+fn backproject(frame: &RgbdFrame, pose: &Pose, k: &Intrinsics) -> GaussianMap {
+    let mut map = GaussianMap::new();
+    for v in 0..frame.height {
+        for u in 0..frame.width {
+            let Some(z) = frame.depth_m(u, v) else {
+                continue;
+            };
+            let p = pose * k.backproject(u as f64, v as f64, z as f64);
+            let i = (v * frame.width + u) as usize;
+            let color = [0, 1, 2].map(|c| frame.rgb[3 * i + c] as f32 / 255.0);
+            let s = 0.5 * z / k.fx as f32;
+            map.push(Gaussian::from_values(
+                [p.x as f32, p.y as f32, p.z as f32],
+                [1.0, 0.0, 0.0, 0.0],
+                [s; 3],
+                0.95,
+                color,
+                0,
+            ));
+        }
+    }
+    map
+}
+
+fn posed(source: &mut SyntheticSource, indices: &[usize]) -> Vec<(RgbdFrame, Pose)> {
+    indices
+        .iter()
+        .map(|&i| {
+            let f = source.frame(i).expect("frame");
+            let pose = f.gt_pose.expect("synthetic frames have poses");
+            (f, pose)
+        })
+        .collect()
+}
+
+#[test]
+fn refinement_raises_psnr_of_a_perturbed_map() {
+    let mut room = small_room();
+    let k = room.intrinsics();
+    let keyframes = posed(&mut room, &[0, 3, 6]);
+    let mut map = backproject(&keyframes[0].0, &keyframes[0].1, &k);
+    // Perturb colours: refinement must pull them back towards the frames.
+    let mut rng = ChaCha8Rng::seed_from_u64(7);
+    for dc in &mut map.sh_dc {
+        for v in dc.iter_mut() {
+            *v += rng.gen_range(-0.6..0.6);
+        }
+    }
+    let before = evaluate_render_quality(&map, keyframes.clone(), k, 1, None).expect("evaluates");
+    let config = RefineConfig {
+        iters: 100,
+        downscale: false,
+        ..RefineConfig::default()
+    };
+    let mut calls = 0;
+    let stats = refine(&mut map, &keyframes, k, &config, |_, _| {
+        calls += 1;
+        ControlFlow::Continue(())
+    })
+    .expect("refines");
+    let after = evaluate_render_quality(&map, keyframes.clone(), k, 1, None).expect("evaluates");
+    println!(
+        "refine 100 its: PSNR {:.2} → {:.2} dB, SSIM {:.4} → {:.4}; {stats:?}",
+        before.psnr_db, after.psnr_db, before.ssim, after.ssim
+    );
+    assert_eq!(calls, 100);
+    assert!(stats.last_loss < stats.first_loss, "{stats:?}");
+    // Measured 17.48 → 21.39 dB, SSIM 0.416 → 0.746.
+    assert!(
+        after.psnr_db > before.psnr_db + 2.5,
+        "{before:?} → {after:?}"
+    );
+    assert!(after.ssim > before.ssim + 0.2, "{before:?} → {after:?}");
+}
+
+#[test]
+fn refinement_stops_when_the_caller_says_so() {
+    let mut room = small_room();
+    let k = room.intrinsics();
+    let keyframes = posed(&mut room, &[0, 3]);
+    let mut map = backproject(&keyframes[0].0, &keyframes[0].1, &k);
+    let before = map.len();
+    let config = RefineConfig {
+        iters: 100,
+        ..RefineConfig::default()
+    };
+    let stats = refine(&mut map, &keyframes, k, &config, |i, _| {
+        if i == 7 {
+            ControlFlow::Break(())
+        } else {
+            ControlFlow::Continue(())
+        }
+    })
+    .expect("refines");
+    assert_eq!(stats.iterations, 7);
+    assert_eq!(stats.gaussians_before, before);
+    assert_eq!(stats.gaussians_after, map.len());
+}
