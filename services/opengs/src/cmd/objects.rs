@@ -78,7 +78,7 @@ struct ViewArgs {
     #[arg(long, value_parser = args::parse_size)]
     size: Option<(u32, u32)>,
     /// Near plane in metres: Gaussians closer than this are culled.
-    #[arg(long, default_value_t = 0.05)]
+    #[arg(long, default_value_t = opengs_splat::DEFAULT_NEAR)]
     near: f32,
 }
 
