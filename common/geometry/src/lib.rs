@@ -5,9 +5,11 @@
 //! stored camera-to-world as in TUM and Replica files, camera looking down +z.
 
 mod intrinsics;
+mod ply;
 mod pose;
 
 pub use intrinsics::Intrinsics;
+pub use ply::{read_vertex_table, PlyError, VertexTable};
 pub use pose::{format_tum_pose, parse_tum_pose, pose_from_tum, pose_to_tum, Pose, PoseParseError};
 
 pub use nalgebra;

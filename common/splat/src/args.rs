@@ -1,4 +1,4 @@
-//! Parsers for command-line values shared by `opengs render` and `opengs bench-render`.
+//! Parsers for command-line values shared by `opengs render`, `opengs objects` and `opengs bench render`.
 
 use opengs_geometry::Intrinsics;
 

@@ -359,13 +359,51 @@ fn smooth_seeds(n: usize, count: usize) -> Vec<u64> {
 
 #[test]
 fn gradients_match_finite_differences_on_random_scenes() {
-    for n in [3, 6, 10] {
-        let seeds = smooth_seeds(n, 2);
-        assert!(!seeds.is_empty());
-        for s in seeds {
-            let (map, cam) = random_scene(s, n);
-            assert_gradients(s, n, &map, &cam);
+    // Every kernel level this CPU has: the portable backward is tested on any machine.
+    for level in crate::cpu::SimdLevel::available() {
+        crate::cpu::cap_level(Some(level));
+        for n in [3, 6, 10] {
+            let seeds = smooth_seeds(n, 2);
+            assert!(!seeds.is_empty());
+            for s in seeds {
+                let (map, cam) = random_scene(s, n);
+                assert_gradients(s, n, &map, &cam);
+            }
         }
+        crate::cpu::cap_level(None);
+    }
+}
+
+#[test]
+fn every_kernel_level_gives_the_same_gradients() {
+    let k = Intrinsics::new(131.25, 131.25, 79.5, 59.5, 160, 120);
+    let cam = Camera::from_pose(k, &crate::scene::indoor_poses(1)[0], 0.05);
+    let map = crate::scene::indoor_scene(20_000, 3);
+    let (wc, wd) = weights(7, 160 * 120);
+    let grads_at = |level| {
+        crate::cpu::cap_level(Some(level));
+        let rendered = render(&map, &cam, &RenderRequest::color_depth());
+        let mut g = MapGrads::default();
+        Backward::new().run(&map, &cam, &rendered, &wc, &wd, &mut g);
+        crate::cpu::cap_level(None);
+        flatten_grads(&g)
+    };
+    let portable = grads_at(crate::cpu::SimdLevel::Portable);
+    let norm: f64 = portable.iter().map(|a| a * a).sum::<f64>().sqrt();
+    assert!(norm > 0.0);
+    for level in crate::cpu::SimdLevel::available() {
+        let other = grads_at(level);
+        let diff: f64 = portable
+            .iter()
+            .zip(&other)
+            .map(|(a, b)| (a - b).powi(2))
+            .sum::<f64>()
+            .sqrt();
+        assert!(
+            diff / norm < 1e-5,
+            "{level:?}: relative difference {}",
+            diff / norm
+        );
     }
 }
 

@@ -1,6 +1,8 @@
 //! The K heaviest of a pixel's contributions when it has more than K (METHOD §3's G_topK),
 //! kept in front-to-back order: a quickselect whose candidates are lane bit masks.
 
+use crate::cpu::SimdLevel;
+
 /// Longest list [`keep_heaviest`] takes (its lane masks are four 64-bit words).
 pub const KEEP_MAX: usize = 256;
 
@@ -14,12 +16,20 @@ pub const KEEP_MAX: usize = 256;
 /// and a step leaves about half the candidates; much cheaper for the few dozen entries of a
 /// pixel than sorting keys (`select_nth_unstable`'s data-dependent branches mispredict).
 #[inline(always)]
-pub fn keep_heaviest(ws: &[f32], n: usize, m: usize, avx512: bool) -> [u64; 4] {
+pub fn keep_heaviest(ws: &[f32], n: usize, m: usize, simd: SimdLevel) -> [u64; 4] {
+    #[cfg(target_arch = "x86_64")]
+    let avx512 = simd == SimdLevel::Avx512;
+    #[cfg(not(target_arch = "x86_64"))]
+    let avx512 = {
+        let _ = simd;
+        false
+    };
     #[cfg(target_arch = "x86_64")]
     if avx512 && n <= 128 {
         let lanes = n.div_ceil(64) * 64;
         assert!(ws.len() >= lanes, "keep_heaviest: list not padded");
-        // SAFETY: the caller says the CPU has AVX-512 F and BW; the list holds the lanes.
+        // SAFETY: the Avx512 level has AVX-512 F and BW (SimdLevel::detected); the list holds
+        // the lanes.
         return unsafe {
             if n <= 64 {
                 keep_heaviest_64_avx512(ws, n, m)
@@ -280,14 +290,9 @@ mod tests {
                     .map(|i| (i as u32, pw[i]))
                     .collect()
             };
-            let got_portable = kept(keep_heaviest(&pw, n, m, false));
-            assert_eq!(got_portable, want, "portable: n {n} m {m} levels {levels}");
-            #[cfg(target_arch = "x86_64")]
-            if std::arch::is_x86_feature_detected!("avx512f")
-                && std::arch::is_x86_feature_detected!("avx512bw")
-            {
-                let got = kept(keep_heaviest(&pw, n, m, true));
-                assert_eq!(got, want, "n {n} m {m} levels {levels}");
+            for simd in SimdLevel::available() {
+                let got = kept(keep_heaviest(&pw, n, m, simd));
+                assert_eq!(got, want, "{simd:?}: n {n} m {m} levels {levels}");
             }
         }
     }

@@ -14,6 +14,7 @@ pub mod bench;
 mod bin;
 mod blend;
 mod camera;
+pub mod cpu;
 #[cfg(test)]
 mod grad_tests;
 mod grads;

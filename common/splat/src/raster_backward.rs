@@ -13,6 +13,7 @@ use rayon::prelude::*;
 
 use crate::bin::TileBins;
 use crate::blend::{exp_approx, gaussian_power, MAX_ALPHA, MIN_ALPHA};
+use crate::cpu::SimdLevel;
 use crate::output::RenderOutput;
 use crate::project::Projected;
 use crate::tiles::{TileGrid, TILE_SIZE};
@@ -94,6 +95,7 @@ impl RasterBackward {
             output,
             dl_dcolor,
             dl_ddepth,
+            simd: SimdLevel::current(),
         };
         (0..grid.tile_count())
             .into_par_iter()
@@ -127,6 +129,8 @@ struct Ctx<'a> {
     output: &'a RenderOutput,
     dl_dcolor: &'a [[f32; 3]],
     dl_ddepth: &'a [f32],
+    /// Read on the calling thread: the workers have no cap of their own.
+    simd: SimdLevel,
 }
 
 /// Per-pixel state of one tile while walking back to front.
@@ -157,23 +161,15 @@ impl TileBack {
 }
 
 fn run_tile(ctx: &Ctx, st: &mut TileBack, tile: usize, buf: &mut [ScreenGrad]) {
-    #[cfg(target_arch = "x86_64")]
-    {
-        if std::arch::is_x86_feature_detected!("avx512f")
-            && std::arch::is_x86_feature_detected!("avx512bw")
-            && std::arch::is_x86_feature_detected!("avx512vl")
-        {
-            // SAFETY: the CPU supports these features (checked just above).
-            unsafe { tile_backward_avx512(ctx, st, tile, buf) };
-            return;
-        }
-        if std::arch::is_x86_feature_detected!("avx2") {
-            // SAFETY: the CPU supports AVX2 (checked just above).
-            unsafe { tile_backward_avx2(ctx, st, tile, buf) };
-            return;
-        }
+    match ctx.simd {
+        // SAFETY: the Avx512 level has AVX-512 F/BW/VL and AVX2 (SimdLevel::detected).
+        #[cfg(target_arch = "x86_64")]
+        SimdLevel::Avx512 => unsafe { tile_backward_avx512(ctx, st, tile, buf) },
+        // SAFETY: the Avx2 level has AVX2 (SimdLevel::detected).
+        #[cfg(target_arch = "x86_64")]
+        SimdLevel::Avx2 => unsafe { tile_backward_avx2(ctx, st, tile, buf) },
+        SimdLevel::Portable => tile_backward(ctx, st, tile, buf),
     }
-    tile_backward(ctx, st, tile, buf);
 }
 
 /// The kernel compiled for AVX-512: a 16-lane row is one register, masks are native.

@@ -25,10 +25,11 @@ use rayon::prelude::*;
 
 use crate::bin::TileBins;
 use crate::blend::{alpha_of, gaussian_power, MIN_ALPHA, MIN_TRANSMITTANCE};
+use crate::cpu::SimdLevel;
 use crate::keep_heaviest::{keep_heaviest, KEEP_MAX};
 use crate::output::{RenderOutput, RenderRequest};
 use crate::project::Projected;
-use crate::row_log::{Columns, LogSimd, PackDst, RowLog};
+use crate::row_log::{Columns, PackDst, RowLog};
 use crate::row_votes::RowVotes;
 use crate::tiles::{TileGrid, TILE_SIZE};
 use crate::top_k::{key_rank, topk_key, RowSpan, TopKBand, KEPT_SHIFT};
@@ -123,7 +124,7 @@ pub fn rasterize_into(
         labels,
         top_k,
         visible: visible.as_deref(),
-        simd: simd_level(),
+        simd: SimdLevel::current(),
     };
 
     let band_len = T * w;
@@ -212,64 +213,6 @@ fn count_visible(vis: &[AtomicBool], labels: &[u32]) -> BTreeMap<u32, u32> {
     sparse
 }
 
-/// Which instruction set the tile kernels use.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum Simd {
-    Portable,
-    #[cfg(target_arch = "x86_64")]
-    Avx2,
-    #[cfg(target_arch = "x86_64")]
-    Avx512,
-}
-
-impl Simd {
-    /// How the row log is packed with these kernels.
-    fn log(self) -> LogSimd {
-        match self {
-            Simd::Portable => LogSimd::Portable,
-            #[cfg(target_arch = "x86_64")]
-            Simd::Avx2 => LogSimd::Avx2,
-            #[cfg(target_arch = "x86_64")]
-            Simd::Avx512 => LogSimd::Avx512,
-        }
-    }
-}
-
-thread_local! {
-    /// Tests set this to exercise the portable kernels on any machine (per calling thread,
-    /// so tests running beside it keep their kernels).
-    static FORCE_PORTABLE: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
-}
-
-/// Forces (or stops forcing) the portable kernels on this thread; results are bit-identical.
-#[cfg(test)]
-pub(crate) fn force_portable(on: bool) {
-    FORCE_PORTABLE.with(|f| f.set(on));
-}
-
-fn simd_level() -> Simd {
-    if FORCE_PORTABLE.with(|f| f.get()) {
-        return Simd::Portable;
-    }
-    #[cfg(target_arch = "x86_64")]
-    {
-        if std::arch::is_x86_feature_detected!("avx512f")
-            && std::arch::is_x86_feature_detected!("avx512bw")
-            && std::arch::is_x86_feature_detected!("avx512vl")
-            && std::arch::is_x86_feature_detected!("popcnt")
-        {
-            return Simd::Avx512;
-        }
-        if std::arch::is_x86_feature_detected!("avx2")
-            && std::arch::is_x86_feature_detected!("f16c")
-            && std::arch::is_x86_feature_detected!("popcnt")
-        {
-            return Simd::Avx2;
-        }
-    }
-    Simd::Portable
-}
-
 struct Ctx<'a> {
     projected: &'a Projected,
     bins: &'a TileBins,
@@ -277,7 +220,7 @@ struct Ctx<'a> {
     labels: &'a [u32],
     top_k: Option<usize>,
     visible: Option<&'a [AtomicBool]>,
-    simd: Simd,
+    simd: SimdLevel,
 }
 
 /// Output slices of one band of 16 image rows.
@@ -370,13 +313,13 @@ fn run_tile<const LISTS: bool, const VOTE: bool>(
 ) {
     match ctx.simd {
         #[cfg(target_arch = "x86_64")]
-        // SAFETY: `simd_level` chose Avx512 only after detecting avx512f/bw/vl and popcnt
+        // SAFETY: `SimdLevel::detected` chose Avx512 only after detecting avx512f/bw/vl and popcnt
         // on this CPU.
-        Simd::Avx512 => unsafe { tile_avx512::<LISTS, VOTE>(ctx, scratch, band, tx) },
+        SimdLevel::Avx512 => unsafe { tile_avx512::<LISTS, VOTE>(ctx, scratch, band, tx) },
         #[cfg(target_arch = "x86_64")]
-        // SAFETY: `simd_level` chose Avx2 only after detecting avx2 and popcnt on this CPU.
-        Simd::Avx2 => unsafe { tile_avx2::<LISTS, VOTE>(ctx, scratch, band, tx) },
-        Simd::Portable => tile::<LISTS, VOTE>(ctx, scratch, band, tx),
+        // SAFETY: `SimdLevel::detected` chose Avx2 only after detecting avx2 and popcnt on this CPU.
+        SimdLevel::Avx2 => unsafe { tile_avx2::<LISTS, VOTE>(ctx, scratch, band, tx) },
+        SimdLevel::Portable => tile::<LISTS, VOTE>(ctx, scratch, band, tx),
     }
 }
 
@@ -759,11 +702,7 @@ fn build_top_k(
     let Scratch {
         log, long, keys, ..
     } = scratch;
-    let simd = ctx.simd.log();
-    #[cfg(target_arch = "x86_64")]
-    let avx512 = ctx.simd == Simd::Avx512;
-    #[cfg(not(target_arch = "x86_64"))]
-    let avx512 = false;
+    let simd = ctx.simd;
     let x0 = tx * T;
     for (y, span) in spans[tx * T..][..T].iter_mut().enumerate() {
         let (v0, w0) = (band.topk_visits, band.topk_weights);
@@ -841,7 +780,7 @@ fn build_top_k(
             let unmark = !(1u32 << (KEPT_SHIFT as usize + x));
             if c <= KEEP_MAX {
                 ws[c..c.div_ceil(64) * 64].fill(0.0);
-                let keep = keep_heaviest(ws, c, k, avx512);
+                let keep = keep_heaviest(ws, c, k, simd);
                 for (b, &word) in keep.iter().enumerate().take(c.div_ceil(64)) {
                     let entries = (c - 64 * b).min(64);
                     let mut drop = !word & (!0u64 >> (64 - entries));

@@ -8,6 +8,7 @@
 //! two vector stores per 16 visits and pixel) cost about 5 ms per frame at 100k Gaussians,
 //! 640×480, on one thread; the pack about 3 ms (with f32 weights; f16 took about 1.5 ms off).
 
+use crate::cpu::SimdLevel;
 use crate::tiles::TILE_SIZE;
 use crate::top_k::{store_weight, KEPT_SHIFT, WEIGHT_SCALE};
 use half::f16;
@@ -19,16 +20,6 @@ pub(crate) struct RowLog {
     w: [Vec<[f32; T]>; T],
     /// `[row][visit]`: the visit's Gaussian id.
     g: [Vec<u32>; T],
-}
-
-/// Which instructions pack the log.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub(crate) enum LogSimd {
-    Portable,
-    #[cfg(target_arch = "x86_64")]
-    Avx2,
-    #[cfg(target_arch = "x86_64")]
-    Avx512,
 }
 
 /// Where one row's packed visits go: per visit its id and lanes (reached pixels in bits
@@ -97,7 +88,7 @@ impl RowLog {
     /// Gathers the contributions of the pixels in bit mask `xs` on row `y` into `dst`;
     /// returns how many each pixel has (0 for pixels not gathered).
     #[inline(always)]
-    pub fn gather(&self, y: usize, xs: u32, simd: LogSimd, dst: Columns) -> [usize; T] {
+    pub fn gather(&self, y: usize, xs: u32, simd: SimdLevel, dst: Columns) -> [usize; T] {
         let Columns { stride, visits, ws } = dst;
         let mut len = [0usize; T];
         let n = self.len(y);
@@ -106,7 +97,7 @@ impl RowLog {
             "gather: room for {n} visits per pixel"
         );
         #[cfg(target_arch = "x86_64")]
-        if simd == LogSimd::Avx512 {
+        if simd == SimdLevel::Avx512 {
             // SAFETY: the caller passes Avx512 only after detecting AVX-512 F and POPCNT.
             unsafe { self.gather_avx512(y, xs, stride, visits, ws, &mut len) };
             return len;
@@ -183,7 +174,7 @@ impl RowLog {
     /// Packs row `y` into `dst` (the row's visits in order) and counts each pixel's
     /// contributions.
     #[inline(always)]
-    pub fn pack(&self, y: usize, simd: LogSimd, dst: PackDst) -> Packed {
+    pub fn pack(&self, y: usize, simd: SimdLevel, dst: PackDst) -> Packed {
         let n = self.len(y);
         assert!(
             dst.ids.len() >= n && dst.lanes.len() >= n && dst.weights.len() >= T * n,
@@ -192,11 +183,11 @@ impl RowLog {
         match simd {
             #[cfg(target_arch = "x86_64")]
             // SAFETY: the caller passes Avx512 only after detecting AVX-512 F and POPCNT.
-            LogSimd::Avx512 => unsafe { self.pack_avx512(y, dst) },
+            SimdLevel::Avx512 => unsafe { self.pack_avx512(y, dst) },
             #[cfg(target_arch = "x86_64")]
             // SAFETY: the caller passes Avx2 only after detecting AVX2 and POPCNT.
-            LogSimd::Avx2 => unsafe { self.pack_avx2(y, dst) },
-            LogSimd::Portable => self.pack_portable(y, dst),
+            SimdLevel::Avx2 => unsafe { self.pack_avx2(y, dst) },
+            SimdLevel::Portable => self.pack_portable(y, dst),
         }
     }
 
@@ -381,32 +372,12 @@ mod tests {
     use super::*;
     use crate::top_k::{load_weight, REACHED};
 
-    /// The packers this CPU can run.
-    fn simds_here() -> Vec<LogSimd> {
-        #[allow(unused_mut)]
-        let mut v = vec![LogSimd::Portable];
-        #[cfg(target_arch = "x86_64")]
-        {
-            if std::arch::is_x86_feature_detected!("avx2")
-                && std::arch::is_x86_feature_detected!("popcnt")
-            {
-                v.push(LogSimd::Avx2);
-            }
-            if std::arch::is_x86_feature_detected!("avx512f")
-                && std::arch::is_x86_feature_detected!("popcnt")
-            {
-                v.push(LogSimd::Avx512);
-            }
-        }
-        v
-    }
-
     /// Row 5 of a log with `visits` visits of weights `weight(v, x)` (ids 1000 + v), packed
     /// (the weights read back as f32).
     fn packed(
         visits: usize,
         weight: impl Fn(usize, usize) -> f32,
-        simd: LogSimd,
+        simd: SimdLevel,
     ) -> (Vec<u32>, Vec<u32>, Vec<f32>, [u32; T]) {
         let mut log = RowLog::new();
         for v in 0..visits {
@@ -441,7 +412,7 @@ mod tests {
                 0.0
             }
         };
-        for simd in simds_here() {
+        for simd in SimdLevel::available() {
             let (ids, lanes, weights, counts) = packed(37, weight, simd);
             assert_eq!(ids, (1000..1037).collect::<Vec<u32>>());
             let mut at = 0;
@@ -471,11 +442,11 @@ mod tests {
                 0.0
             }
         };
-        for simd in simds_here() {
+        for simd in SimdLevel::available() {
             for visits in [1, 8, 16, 37, 200, 1500] {
                 assert_eq!(
                     packed(visits, weight, simd),
-                    packed(visits, weight, LogSimd::Portable),
+                    packed(visits, weight, SimdLevel::Portable),
                     "{simd:?}, {visits} visits"
                 );
             }
@@ -484,7 +455,7 @@ mod tests {
 
     #[test]
     fn a_visit_reaching_every_pixel_fills_its_16_weights() {
-        for simd in simds_here() {
+        for simd in SimdLevel::available() {
             let weight = |v, x| (v * 100 + x + 1) as f32 / 1024.0;
             let (_, lanes, weights, counts) = packed(3, weight, simd);
             assert!(lanes.iter().all(|&l| l & REACHED == REACHED));
@@ -513,7 +484,7 @@ mod tests {
             .collect();
         assert_eq!(log.column(2, 3).collect::<Vec<_>>(), want);
         let stride = 48 + 16;
-        for simd in simds_here() {
+        for simd in SimdLevel::available() {
             let (mut visits, mut ws) = (vec![0; T * stride], vec![0.0; T * stride]);
             let len = log.gather(
                 2,

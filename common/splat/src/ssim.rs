@@ -8,6 +8,8 @@
 
 use rayon::prelude::*;
 
+use crate::cpu::SimdLevel;
+
 pub const SSIM_C1: f32 = 0.01 * 0.01;
 pub const SSIM_C2: f32 = 0.03 * 0.03;
 const RADIUS: usize = 5;
@@ -28,6 +30,8 @@ fn kernel() -> [f32; TAPS] {
 /// `dst = G ∗ src` over a `w × h` plane, zero padded, via a horizontal then a vertical pass
 /// (both written as "for each tap, for each x" so the inner loops vectorise).
 pub fn blur(src: &[f32], w: usize, h: usize, tmp: &mut Vec<f32>, dst: &mut [f32]) {
+    // Read on the calling thread: the workers have no cap of their own.
+    let simd = SimdLevel::current();
     let k = kernel();
     tmp.resize(w * h, 0.0);
     tmp.par_chunks_mut(ROWS * w)
@@ -39,7 +43,7 @@ pub fn blur(src: &[f32], w: usize, h: usize, tmp: &mut Vec<f32>, dst: &mut [f32]
                 pad[RADIUS..RADIUS + w].copy_from_slice(srow);
                 trow.fill(0.0);
                 for (tap, &kv) in k.iter().enumerate() {
-                    axpy(trow, kv, &pad[tap..tap + w]);
+                    axpy(simd, trow, kv, &pad[tap..tap + w]);
                 }
             }
         });
@@ -52,7 +56,7 @@ pub fn blur(src: &[f32], w: usize, h: usize, tmp: &mut Vec<f32>, dst: &mut [f32]
             let hi = (y + RADIUS).min(h - 1);
             for yy in lo..=hi {
                 let kv = k[yy + RADIUS - y];
-                axpy(drow, kv, &tmp[yy * w..(yy + 1) * w]);
+                axpy(simd, drow, kv, &tmp[yy * w..(yy + 1) * w]);
             }
         }
     });
@@ -60,21 +64,16 @@ pub fn blur(src: &[f32], w: usize, h: usize, tmp: &mut Vec<f32>, dst: &mut [f32]
 
 /// o += k·v, compiled for the widest vector unit the CPU has.
 #[inline]
-fn axpy(o: &mut [f32], k: f32, v: &[f32]) {
-    #[cfg(target_arch = "x86_64")]
-    {
-        if std::arch::is_x86_feature_detected!("avx512f") {
-            // SAFETY: the CPU supports AVX-512F (checked just above).
-            unsafe { axpy_avx512(o, k, v) };
-            return;
-        }
-        if std::arch::is_x86_feature_detected!("avx2") {
-            // SAFETY: the CPU supports AVX2 (checked just above).
-            unsafe { axpy_avx2(o, k, v) };
-            return;
-        }
+fn axpy(simd: SimdLevel, o: &mut [f32], k: f32, v: &[f32]) {
+    match simd {
+        // SAFETY: the Avx512 level has AVX-512F (SimdLevel::detected).
+        #[cfg(target_arch = "x86_64")]
+        SimdLevel::Avx512 => unsafe { axpy_avx512(o, k, v) },
+        // SAFETY: the Avx2 level has AVX2 (SimdLevel::detected).
+        #[cfg(target_arch = "x86_64")]
+        SimdLevel::Avx2 => unsafe { axpy_avx2(o, k, v) },
+        SimdLevel::Portable => axpy_portable(o, k, v),
     }
-    axpy_portable(o, k, v)
 }
 
 #[inline(always)]
@@ -199,7 +198,45 @@ mod tests {
     }
 
     #[test]
+    fn every_kernel_level_blurs_alike() {
+        let mut rng = ChaCha8Rng::seed_from_u64(3);
+        let (w, h) = (67, 41);
+        let x = random_plane(&mut rng, w * h);
+        let blurred = |level| {
+            crate::cpu::cap_level(Some(level));
+            let (mut tmp, mut out) = (Vec::new(), vec![0.0f32; w * h]);
+            blur(&x, w, h, &mut tmp, &mut out);
+            crate::cpu::cap_level(None);
+            out
+        };
+        let portable = blurred(SimdLevel::Portable);
+        // The blur of a constant-free random plane: interior values near its mean 0.5.
+        assert!(
+            (portable[20 * w + 30] - 0.5).abs() < 0.2,
+            "{}",
+            portable[20 * w + 30]
+        );
+        for level in SimdLevel::available() {
+            let other = blurred(level);
+            let worst = portable
+                .iter()
+                .zip(&other)
+                .map(|(a, b)| (a - b).abs())
+                .fold(0.0f32, f32::max);
+            assert!(worst < 1e-6, "{level:?}: worst difference {worst}");
+        }
+    }
+
+    #[test]
     fn ssim_gradient_matches_finite_differences() {
+        for level in SimdLevel::available() {
+            crate::cpu::cap_level(Some(level));
+            ssim_gradient_matches_finite_differences_here();
+            crate::cpu::cap_level(None);
+        }
+    }
+
+    fn ssim_gradient_matches_finite_differences_here() {
         let mut rng = ChaCha8Rng::seed_from_u64(2);
         let (w, h) = (23, 19);
         let x = random_plane(&mut rng, w * h);

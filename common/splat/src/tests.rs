@@ -54,9 +54,9 @@ fn render_on_both_kernels(
     req: &RenderRequest,
 ) -> [(bool, RenderOutput); 2] {
     [false, true].map(|portable| {
-        crate::rasterize::force_portable(portable);
+        crate::cpu::cap_level(portable.then_some(crate::cpu::SimdLevel::Portable));
         let o = render(map, cam, req).output;
-        crate::rasterize::force_portable(false);
+        crate::cpu::cap_level(None);
         (portable, o)
     })
 }
@@ -443,9 +443,9 @@ fn portable_kernels_match_simd_kernels() {
         only_labels,
     ] {
         let simd = render(&map, &cam, &req).output;
-        crate::rasterize::force_portable(true);
+        crate::cpu::cap_level(Some(crate::cpu::SimdLevel::Portable));
         let portable = render(&map, &cam, &req).output;
-        crate::rasterize::force_portable(false);
+        crate::cpu::cap_level(None);
         assert_eq!(simd.color, portable.color);
         assert_eq!(simd.depth, portable.depth);
         assert_eq!(simd.final_transmittance, portable.final_transmittance);
@@ -536,9 +536,9 @@ fn crowded_rows_match_the_reference() {
     }
     assert!(truncated > 0, "the block's pixels should be truncated to K");
     // The portable kernels build the same lists.
-    crate::rasterize::force_portable(true);
+    crate::cpu::cap_level(Some(crate::cpu::SimdLevel::Portable));
     let portable = render(&map, &cam, &RenderRequest::semantic(50)).output;
-    crate::rasterize::force_portable(false);
+    crate::cpu::cap_level(None);
     let tp = portable.top_k.as_ref().expect("asked");
     for y in 0..48 {
         for x in 0..64 {

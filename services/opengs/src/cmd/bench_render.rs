@@ -1,4 +1,4 @@
-//! `opengs bench-render`: the renderer benchmark (median ms per frame) on synthetic scenes.
+//! `opengs bench render`: the renderer benchmark (median ms per frame) on synthetic scenes.
 
 use anyhow::Context;
 use opengs_splat::args;
