@@ -1,7 +1,10 @@
-//! Reads a 2-D little-endian float32 `.npy` file (what `numpy.save` writes
-//! for a `float32` matrix), e.g. the detector's text feature per tag.
+//! Reads a 2-D float32 `.npy` file (what `numpy.save` writes for a `float32` matrix), e.g.
+//! the detector's text feature per tag, through ndarray-npy.
 
 use std::path::Path;
+
+use ndarray::Array2;
+use ndarray_npy::{ReadNpyError, ReadNpyExt};
 
 use crate::PerceptionError;
 
@@ -32,73 +35,18 @@ fn file_error(path: &Path, e: impl std::fmt::Display) -> PerceptionError {
     }
 }
 
-/// Parses `.npy` bytes (format versions 1–3).
+/// Parses the bytes of a 2-D float32 `.npy` file (ndarray-npy reads the format).
 pub fn parse_f32_matrix(bytes: &[u8]) -> Result<Matrix, String> {
-    const MAGIC: &[u8] = b"\x93NUMPY";
-    if bytes.len() < 10 || &bytes[..6] != MAGIC {
-        return Err("not a .npy file (no \\x93NUMPY magic)".into());
-    }
-    let (header_len, start) = match bytes[6] {
-        1 => (u16::from_le_bytes([bytes[8], bytes[9]]) as usize, 10),
-        2 | 3 if bytes.len() >= 12 => (
-            u32::from_le_bytes([bytes[8], bytes[9], bytes[10], bytes[11]]) as usize,
-            12,
-        ),
-        v => return Err(format!("unsupported .npy format version {v}")),
-    };
-    let header = bytes
-        .get(start..start + header_len)
-        .ok_or("truncated .npy header")?;
-    let header = std::str::from_utf8(header).map_err(|_| "header is not text")?;
-    let descr = dict_value(header, "descr").ok_or("header has no 'descr'")?;
-    if !matches!(descr.trim_matches(['\'', '"']), "<f4" | "=f4" | "f4") {
-        return Err(format!(
-            "dtype {descr}: expected little-endian float32 ('<f4'); save with np.float32"
-        ));
-    }
-    let fortran = dict_value(header, "fortran_order").ok_or("header has no 'fortran_order'")?;
-    if fortran != "False" {
-        return Err("Fortran-ordered array: save a C-ordered array (np.ascontiguousarray)".into());
-    }
-    let shape = dict_value(header, "shape").ok_or("header has no 'shape'")?;
-    let dims: Vec<usize> = shape
-        .trim_matches(['(', ')'])
-        .split(',')
-        .map(str::trim)
-        .filter(|s| !s.is_empty())
-        .map(|s| s.parse::<usize>().map_err(|_| format!("bad shape {shape}")))
-        .collect::<Result<_, _>>()?;
-    let [rows, cols] = dims[..] else {
-        return Err(format!("shape {shape}: expected a 2-D array [tags, dim]"));
-    };
-    let payload = &bytes[start + header_len..];
-    if payload.len() != rows * cols * 4 {
-        return Err(format!(
-            "shape {shape} needs {} bytes of data, file has {}",
-            rows * cols * 4,
-            payload.len()
-        ));
-    }
-    let data = payload
-        .chunks_exact(4)
-        .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
-        .collect();
+    let array = Array2::<f32>::read_npy(bytes).map_err(|e| match e {
+        ReadNpyError::WrongDescriptor(_) => {
+            format!("expected a 2-D float32 matrix (numpy.save of a float32 array): {e}")
+        }
+        ReadNpyError::WrongNdim(..) => format!("expected a 2-D float32 matrix: {e}"),
+        other => other.to_string(),
+    })?;
+    let (rows, cols) = array.dim();
+    let data = array.as_standard_layout().iter().copied().collect();
     Ok(Matrix { rows, cols, data })
-}
-
-/// The raw text of `key`'s value in the header's Python dict literal.
-fn dict_value<'a>(header: &'a str, key: &str) -> Option<&'a str> {
-    let at = header
-        .find(&format!("'{key}'"))
-        .or_else(|| header.find(&format!("\"{key}\"")))?;
-    let rest = header[at + key.len() + 2..].trim_start();
-    let rest = rest.strip_prefix(':')?.trim_start();
-    let end = if rest.starts_with('(') {
-        rest.find(')')? + 1
-    } else {
-        rest.find([',', '}']).unwrap_or(rest.len())
-    };
-    Some(rest[..end].trim())
 }
 
 #[cfg(test)]
@@ -147,9 +95,7 @@ mod tests {
             "{'descr': '<f4', 'fortran_order': False, 'shape': (2, 2), }",
             &[0.0; 3],
         );
-        assert!(parse_f32_matrix(&short)
-            .unwrap_err()
-            .contains("needs 16 bytes"));
+        assert!(parse_f32_matrix(&short).is_err());
         assert!(parse_f32_matrix(b"hello").is_err());
     }
 }

@@ -1,43 +1,23 @@
-//! Colour maps for the side-by-side PNGs: one for depth, one for error.
+//! Colour maps for the side-by-side PNGs (colorous): Turbo for depth, Inferno for error.
 
-/// Piecewise-linear map through `stops` (evenly spaced over [0, 1]).
-fn ramp(stops: &[[f32; 3]], v: f32) -> [u8; 3] {
+fn eval(gradient: colorous::Gradient, v: f32) -> [u8; 3] {
     let v = if v.is_finite() {
         v.clamp(0.0, 1.0)
     } else {
         0.0
     };
-    let x = v * (stops.len() - 1) as f32;
-    let i = (x.floor() as usize).min(stops.len() - 2);
-    let f = x - i as f32;
-    std::array::from_fn(|c| {
-        let a = stops[i][c];
-        let b = stops[i + 1][c];
-        ((a + (b - a) * f) * 255.0).round() as u8
-    })
+    let c = gradient.eval_continuous(v as f64);
+    [c.r, c.g, c.b]
 }
 
-/// Near → far as blue → cyan → green → yellow → red (turbo-like; reads well in print).
+/// Near → far as dark → blue → green → yellow → dark red (Turbo).
 pub fn depth_color(v: f32) -> [u8; 3] {
-    const STOPS: [[f32; 3]; 5] = [
-        [0.19, 0.07, 0.55],
-        [0.10, 0.65, 0.95],
-        [0.30, 0.90, 0.35],
-        [0.98, 0.85, 0.15],
-        [0.75, 0.05, 0.05],
-    ];
-    ramp(&STOPS, v)
+    eval(colorous::TURBO, v)
 }
 
-/// Small → large error as black → red → yellow → white ("hot").
+/// Small → large error as black → purple → orange → light yellow (Inferno).
 pub fn error_color(v: f32) -> [u8; 3] {
-    const STOPS: [[f32; 3]; 4] = [
-        [0.0, 0.0, 0.0],
-        [0.85, 0.0, 0.0],
-        [1.0, 0.85, 0.0],
-        [1.0, 1.0, 1.0],
-    ];
-    ramp(&STOPS, v)
+    eval(colorous::INFERNO, v)
 }
 
 #[cfg(test)]
@@ -46,10 +26,15 @@ mod tests {
 
     #[test]
     fn ends_and_clamping() {
-        assert_eq!(error_color(0.0), [0, 0, 0]);
-        assert_eq!(error_color(1.0), [255, 255, 255]);
-        assert_eq!(error_color(7.0), [255, 255, 255]);
-        assert_eq!(error_color(f32::NAN), [0, 0, 0]);
-        assert_eq!(depth_color(1.0), [191, 13, 13]);
+        let (black, top) = (error_color(0.0), error_color(1.0));
+        assert!(black.iter().all(|&c| c < 10), "{black:?}");
+        assert!(top[0] > 240 && top[1] > 240, "{top:?}");
+        assert_eq!(error_color(7.0), top);
+        assert_eq!(error_color(f32::NAN), black);
+        // Turbo: near is dark, the middle green, far red.
+        let (near, mid, far) = (depth_color(0.0), depth_color(0.5), depth_color(1.0));
+        assert!(near.iter().map(|&c| c as u32).sum::<u32>() < 120, "{near:?}");
+        assert!(mid[1] > mid[0] && mid[1] > mid[2], "{mid:?}");
+        assert!(far[0] > far[1] && far[0] > far[2], "{far:?}");
     }
 }

@@ -1,7 +1,8 @@
 //! The pixel pass that writes the consistent input label map and fills relabel / prune regions.
 
-use crate::fast_hash::LabelMap;
+// FxHash: the keys are labels from our own pipeline, so SipHash's flood resistance buys nothing.
 use crate::output::{CounterPruneRegion, RelabelInstruction};
+use rustc_hash::FxHashMap;
 
 /// What a pixel with this input label does.
 #[derive(Debug, Clone, Copy, Default)]
@@ -31,8 +32,8 @@ pub(crate) struct RenderedPixelRule {
 /// Per-label rules; pixels of labels without a rule get 0 and join no region.
 #[derive(Debug, Default)]
 pub(crate) struct PixelRules {
-    pub input: LabelMap<u32, InputPixelRule>,
-    pub rendered: LabelMap<u32, RenderedPixelRule>,
+    pub input: FxHashMap<u32, InputPixelRule>,
+    pub rendered: FxHashMap<u32, RenderedPixelRule>,
 }
 
 /// One pass over the pixels; label lookups happen only when a label changes along the row.

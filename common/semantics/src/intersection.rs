@@ -2,7 +2,8 @@
 
 use std::collections::BTreeMap;
 
-use crate::fast_hash::LabelMap;
+// FxHash: the keys are labels from our own pipeline, so SipHash's flood resistance buys nothing.
+use rustc_hash::FxHashMap;
 
 /// Pixel counts of both label maps and of every co-occurring (input, rendered) pair, 0 included.
 #[derive(Debug, Clone, Default, PartialEq)]
@@ -18,7 +19,7 @@ pub struct Overlap {
 impl Overlap {
     /// Counts in one pass; equal-length slices are the caller's job (checked by the consensus).
     pub fn count(input: &[u32], rendered: &[u32]) -> Self {
-        let mut runs: LabelMap<(u32, u32), u32> = LabelMap::default();
+        let mut runs: FxHashMap<(u32, u32), u32> = FxHashMap::default();
         let mut pixels = input.iter().zip(rendered);
         let Some((&s0, &r0)) = pixels.next() else {
             return Self::default();

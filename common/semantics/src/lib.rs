@@ -50,7 +50,6 @@ mod consensus;
 mod consistent_map;
 mod counter_pruning;
 mod error;
-mod fast_hash;
 mod input;
 mod intersection;
 mod label_table;

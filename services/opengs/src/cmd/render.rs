@@ -23,7 +23,7 @@ pub struct RenderArgs {
     #[arg(long)]
     pub out: PathBuf,
     /// Near plane in metres: Gaussians closer than this are culled.
-    #[arg(long, default_value_t = 0.05)]
+    #[arg(long, default_value_t = opengs_splat::DEFAULT_NEAR)]
     pub near: f32,
     /// Also compute the per-pixel top-K Gaussians (K = 50) and write topk_count.png.
     #[arg(long)]
