@@ -58,7 +58,7 @@ impl Ablation {
     }
 }
 
-/// The consensus's flags that `opengs run` sets ([`crate::run::StageFlags`]); one struct for
+/// The consensus's flags that `opengs run` sets ([`crate::run_options::StageFlags`]); one struct for
 /// parsing and for writing them.
 #[derive(clap::Args, Debug, Clone, Default, PartialEq)]
 pub struct ConsensusRunFlags {

@@ -11,6 +11,7 @@ pub mod mapper_stage;
 pub mod progress;
 pub mod recorder;
 pub mod run;
+pub mod run_options;
 pub mod run_outputs;
 pub mod run_record;
 pub mod scoring;
@@ -24,6 +25,7 @@ pub mod tracker_stage;
 
 pub use dataset_args::DatasetArgs;
 pub use deploy::{DeployFile, StageSpec};
-pub use run::{run, RunOptions, RunSummary, StageFlags};
+pub use run::{run, RunSummary};
+pub use run_options::{RunOptions, StageFlags};
 pub use run_record::{RunRecord, StageRecord};
 pub use supervisor::{Supervised, Supervisor};

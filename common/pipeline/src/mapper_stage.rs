@@ -28,7 +28,7 @@ use opengs_splat::{read_ply_file, write_ply_file, Camera, GaussianMap};
 
 use opengs_runtime::finish_requested_flag;
 
-/// The mapper's flags that `opengs run` sets ([`crate::run::StageFlags`]); one struct for
+/// The mapper's flags that `opengs run` sets ([`crate::run_options::StageFlags`]); one struct for
 /// parsing and for writing them.
 #[derive(clap::Args, Debug, Clone, Default, PartialEq)]
 pub struct MapperRunFlags {

@@ -4,7 +4,7 @@
 
 use opengs_eval::RunDir;
 
-use crate::run::RunOptions;
+use crate::run_options::RunOptions;
 use crate::run_record::RunRecord;
 use crate::supervisor::Supervised;
 

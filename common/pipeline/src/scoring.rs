@@ -8,7 +8,7 @@ use opengs_eval::RunDir;
 
 use opengs_quality::{RunMetrics, SemanticReport};
 
-use crate::run::RunOptions;
+use crate::run_options::RunOptions;
 
 /// What could be scored.
 #[derive(Debug, Default)]

@@ -22,7 +22,7 @@ use opengs_telemetry::{ChromeTrace, LatencyProfile, StageSample};
 use crate::deploy::{DeployFile, StageRole};
 use crate::progress::Progress;
 use crate::recorder::Recorder;
-use crate::run::{RunOptions, StageFlags};
+use crate::run_options::{RunOptions, StageFlags};
 use crate::run_record::StageRecord;
 use crate::stage_process::{StageProcess, StageState};
 use crate::status::{PipelineStatus, StageStatus};

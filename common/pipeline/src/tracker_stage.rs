@@ -26,7 +26,7 @@ pub struct TrackerArgs {
     pub ignore_map: bool,
 }
 
-/// The tracker's flags that `opengs run` sets ([`crate::run::StageFlags`]); one struct for
+/// The tracker's flags that `opengs run` sets ([`crate::run_options::StageFlags`]); one struct for
 /// parsing and for writing them, so the two cannot disagree.
 #[derive(clap::Args, Debug, Clone, Default, PartialEq)]
 pub struct TrackerRunFlags {
