@@ -37,12 +37,14 @@ fn file_error(path: &Path, e: impl std::fmt::Display) -> PerceptionError {
 
 /// Parses the bytes of a 2-D float32 `.npy` file (ndarray-npy reads the format).
 pub fn parse_f32_matrix(bytes: &[u8]) -> Result<Matrix, String> {
-    let array = Array2::<f32>::read_npy(bytes).map_err(|e| match e {
-        ReadNpyError::WrongDescriptor(_) => {
-            format!("expected a 2-D float32 matrix (numpy.save of a float32 array): {e}")
-        }
-        ReadNpyError::WrongNdim(..) => format!("expected a 2-D float32 matrix: {e}"),
-        other => other.to_string(),
+    let array = Array2::<f32>::read_npy(bytes).map_err(|e| {
+        let what = match e {
+            ReadNpyError::WrongDescriptor(_) | ReadNpyError::WrongNdim(..) => {
+                "not a 2-D float32 .npy matrix (numpy.save of a float32 array)"
+            }
+            _ => "not a readable .npy file",
+        };
+        format!("{what}: {e}")
     })?;
     let (rows, cols) = array.dim();
     let data = array.as_standard_layout().iter().copied().collect();

@@ -33,7 +33,10 @@ mod tests {
         assert_eq!(error_color(f32::NAN), black);
         // Turbo: near is dark, the middle green, far red.
         let (near, mid, far) = (depth_color(0.0), depth_color(0.5), depth_color(1.0));
-        assert!(near.iter().map(|&c| c as u32).sum::<u32>() < 120, "{near:?}");
+        assert!(
+            near.iter().map(|&c| c as u32).sum::<u32>() < 120,
+            "{near:?}"
+        );
         assert!(mid[1] > mid[0] && mid[1] > mid[2], "{mid:?}");
         assert!(far[0] > far[1] && far[0] > far[2], "{far:?}");
     }

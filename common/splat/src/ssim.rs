@@ -5,6 +5,9 @@
 //! ssim = (2μxμy + C1)(2σxy + C2) / ((μx² + μy² + C1)(σxx + σyy + C2)),
 //! σxx = m_xx − μx², σxy = m_xy − μxμy. As G∗ is self-adjoint (symmetric kernel, zero
 //! padding): ∂Σssim/∂x = G∗(∂/∂μx) + 2x·G∗(∂/∂m_xx) + y·G∗(∂/∂m_xy).
+//!
+//! Hand-written: the mapping loss needs this gradient, which no image crate provides, and it
+//! runs every mapping step (the hot path).
 
 use rayon::prelude::*;
 
