@@ -67,12 +67,20 @@ pub fn run(opts: RunOptions) -> anyhow::Result<RunSummary> {
         scores,
     };
     match supervised.ending? {
-        Ending::StageFailed(why) => Err(anyhow::anyhow!(
-            "{why}; outputs so far are in {}",
-            opts.out_dir.display()
-        )),
+        Ending::StageFailed(why) => Err(anyhow::Error::new(StageFailed {
+            why,
+            out_dir: opts.out_dir.clone(),
+        })),
         _ => Ok(summary),
     }
+}
+
+/// A stage died more often than its restart limit allows; the run stopped there.
+#[derive(Debug, thiserror::Error)]
+#[error("{why}; outputs so far are in {}", out_dir.display())]
+pub struct StageFailed {
+    pub why: String,
+    pub out_dir: PathBuf,
 }
 
 #[cfg(test)]

@@ -10,4 +10,4 @@ mod trace;
 
 pub use profile::{LatencyProfile, StageSample};
 pub use summary::{LatencyReport, Percentiles, StageLatency};
-pub use trace::ChromeTrace;
+pub use trace::{overlapping_complete_events, ChromeTrace};

@@ -1,6 +1,7 @@
 //! `opengs`: the one user-facing command.
 
 mod cmd;
+mod exit;
 
 use std::process::ExitCode;
 
@@ -67,9 +68,6 @@ fn main() -> ExitCode {
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
-        Err(e) => {
-            eprintln!("error: {e:#}");
-            ExitCode::FAILURE
-        }
+        Err(e) => exit::code_of(&e),
     }
 }

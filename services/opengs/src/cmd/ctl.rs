@@ -34,8 +34,8 @@ enum CtlWhat {
     Swap {
         /// The stage to swap, e.g. `segmenter`.
         stage: String,
-        /// The new kind, e.g. `classic`, `prior`, `sam`, `mobilesamv2`.
-        #[arg(long)]
+        /// The new kind.
+        #[arg(long, value_parser = crate::cmd::run::segmenter_kinds())]
         to: String,
     },
 }

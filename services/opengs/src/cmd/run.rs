@@ -31,7 +31,7 @@ pub struct RunArgs {
     #[arg(long)]
     pub max_rate: Option<f64>,
     /// Segmenter to start with: classic (no weights), prior (ground truth), sam, mobilesamv2.
-    #[arg(long)]
+    #[arg(long, value_parser = segmenter_kinds())]
     pub segmenter: Option<String>,
     /// Switch a consensus module off (repeatable), as in the paper's ablation table.
     #[arg(long, value_enum)]
@@ -57,9 +57,20 @@ pub struct RunArgs {
     pub run_id: Option<String>,
 }
 
+/// The segmenter kinds, for `--help` and for refusing a typo before any process starts.
+pub fn segmenter_kinds() -> clap::builder::PossibleValuesParser {
+    clap::builder::PossibleValuesParser::new(
+        opengs_perception::SegmenterKind::ALL.map(|k| k.as_str()),
+    )
+}
+
 pub fn run(args: RunArgs) -> anyhow::Result<()> {
     let summary = execute(&args)?;
     print_summary(&summary);
+    if summary.interrupted {
+        // Outputs are written; the exit status says the run did not reach its end.
+        return Err(crate::exit::Interrupted.into());
+    }
     Ok(())
 }
 
