@@ -74,17 +74,21 @@ fn time_one(
     })
 }
 
-/// Times classic and prior on `frames` synthetic frames spread over the loop,
+/// Times geometry, classic and prior on `frames` synthetic frames spread over the loop,
 /// each segmented `repeats` times (the first run of each frame is a warm-up).
 pub fn time_segmenters(
     frames: usize,
     repeats: usize,
 ) -> Result<Vec<SegmentTiming>, PerceptionError> {
     let bench = bench_frames(frames)?;
-    [SegmenterKind::Classic, SegmenterKind::Prior]
-        .into_iter()
-        .map(|kind| time_one(kind.as_str(), kind.create()?.as_mut(), &bench, repeats))
-        .collect()
+    [
+        SegmenterKind::Geometry,
+        SegmenterKind::Classic,
+        SegmenterKind::Prior,
+    ]
+    .into_iter()
+    .map(|kind| time_one(kind.as_str(), kind.create()?.as_mut(), &bench, repeats))
+    .collect()
 }
 
 /// Times the tiny-model ensemble (encoder, box proposals, box-prompted

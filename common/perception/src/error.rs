@@ -14,7 +14,7 @@ pub enum PerceptionError {
     /// The prior segmenter needs the dataset's instance image.
     #[error("frame has no ground-truth instance labels (the prior segmenter needs a dataset with labels, e.g. synthetic or Replica)")]
     MissingLabels,
-    #[error("unknown segmenter '{0}': expected classic, prior, sam or mobilesamv2")]
+    #[error("unknown segmenter '{0}': expected geometry, classic, prior, sam or mobilesamv2")]
     UnknownKind(String),
     /// The segmenter exists in the interface but cannot run in this build/config.
     #[error("segmenter '{kind}' is unavailable: {reason}")]

@@ -3,7 +3,10 @@
 use std::fmt;
 use std::str::FromStr;
 
-use crate::{ClassicSegmenter, PerceptionError, PriorSegmenter, Segmenter, SegmenterOptions};
+use crate::{
+    ClassicSegmenter, GeometrySegmenter, PerceptionError, PriorSegmenter, Segmenter,
+    SegmenterOptions,
+};
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
 pub enum SegmenterKind {
@@ -16,10 +19,20 @@ pub enum SegmenterKind {
     Sam,
     /// MobileSAMv2 (ONNX).
     MobileSamV2,
+    /// Depth-first object partitioning by local convexity (LCCP-style), no
+    /// weights; colour only where geometry is undecided.
+    Geometry,
 }
 
 impl SegmenterKind {
-    pub const ALL: [SegmenterKind; 4] = [Self::Classic, Self::Prior, Self::Sam, Self::MobileSamV2];
+    /// Index = `kind_id` on the wire: append, never reorder.
+    pub const ALL: [SegmenterKind; 5] = [
+        Self::Classic,
+        Self::Prior,
+        Self::Sam,
+        Self::MobileSamV2,
+        Self::Geometry,
+    ];
 
     pub fn as_str(&self) -> &'static str {
         match self {
@@ -27,6 +40,7 @@ impl SegmenterKind {
             Self::Prior => "prior",
             Self::Sam => "sam",
             Self::MobileSamV2 => "mobilesamv2",
+            Self::Geometry => "geometry",
         }
     }
 
@@ -50,6 +64,7 @@ impl SegmenterKind {
         let segmenter: Box<dyn Segmenter> = match self {
             Self::Classic => Box::new(ClassicSegmenter::new(options.classic)?),
             Self::Prior => Box::new(PriorSegmenter::new()),
+            Self::Geometry => Box::new(GeometrySegmenter::new(options.geometry)?),
             Self::Sam | Self::MobileSamV2 => self.create_model_runner(options)?,
         };
         if options.ensemble.any() {
@@ -107,7 +122,8 @@ impl SegmenterKind {
         &self,
         _options: &SegmenterOptions,
     ) -> Result<Box<dyn Segmenter>, PerceptionError> {
-        Err(self.unavailable("built without the `onnx` cargo feature; use classic or prior"))
+        Err(self
+            .unavailable("built without the `onnx` cargo feature; use geometry, classic or prior"))
     }
 
     fn unavailable(&self, reason: &str) -> PerceptionError {
@@ -139,6 +155,7 @@ impl FromStr for SegmenterKind {
             "prior" => Ok(Self::Prior),
             "sam" => Ok(Self::Sam),
             "mobilesamv2" => Ok(Self::MobileSamV2),
+            "geometry" => Ok(Self::Geometry),
             _ => Err(PerceptionError::UnknownKind(s.to_string())),
         }
     }
@@ -158,5 +175,8 @@ mod tests {
             Some(SegmenterKind::MobileSamV2)
         );
         assert!("yolo".parse::<SegmenterKind>().is_err());
+        // The wire's kind_id is the index in ALL: the first four never move.
+        assert_eq!(SegmenterKind::ALL[3], SegmenterKind::MobileSamV2);
+        assert_eq!(SegmenterKind::ALL[4], SegmenterKind::Geometry);
     }
 }

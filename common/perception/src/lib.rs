@@ -1,7 +1,8 @@
 //! Open-set instance segmentation front-ends for opengs (METHOD.md §6).
 //!
 //! Every back-end implements [`Segmenter`]: an RGB-D frame in, a label map
-//! plus the input Label-Class table out. `classic` needs no weights,
+//! plus the input Label-Class table out. `geometry` (depth-first, LCCP-style)
+//! and `classic` (graph-based) need no weights,
 //! `prior` replays the dataset's ground-truth instances; `sam` and
 //! `mobilesamv2` run exported ONNX models (cargo feature `onnx`, runtime
 //! library from `ORT_DYLIB_PATH`, see DEPS.md). An optional ensemble
@@ -17,6 +18,7 @@ pub mod classic;
 #[cfg(feature = "onnx")]
 pub mod ensemble;
 mod error;
+pub mod geometry;
 mod kind;
 pub mod model_check;
 mod model_paths;
@@ -29,6 +31,7 @@ mod segmenter;
 
 pub use classic::{ClassicParams, ClassicSegmenter, EdgeWeights};
 pub use error::PerceptionError;
+pub use geometry::{GeometryParams, GeometrySegmenter};
 pub use kind::SegmenterKind;
 pub use model_paths::{EnsembleModelPaths, SamModelPaths, SegmenterOptions};
 pub use prior::PriorSegmenter;

@@ -42,6 +42,7 @@ impl EnsembleModelPaths {
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct SegmenterOptions {
     pub classic: crate::ClassicParams,
+    pub geometry: crate::GeometryParams,
     /// Required for `sam` and `mobilesamv2`.
     pub sam_models: Option<SamModelPaths>,
     /// MobileSAMv2's box-proposal model (YOLOv8 export,

@@ -1,4 +1,4 @@
-//! The segmenter interface shared by the classic, prior and model-based back-ends.
+//! The segmenter interface shared by the geometry, classic, prior and model-based back-ends.
 
 use opengs_datasets::{InstanceClass, RgbdFrame};
 use opengs_geometry::Intrinsics;

@@ -18,7 +18,8 @@ use crate::DatasetArgs;
 /// Options of the segmenter stage.
 #[derive(clap::Args, Debug, Clone)]
 pub struct SegmenterArgs {
-    /// classic (no weights), prior (ground truth), sam or mobilesamv2 (ONNX models).
+    /// geometry (depth-first, no weights), classic (graph-based, no weights), prior (ground
+    /// truth), sam or mobilesamv2 (ONNX models).
     #[arg(long, default_value = "classic")]
     pub kind: String,
     /// SAM-family image encoder ONNX (for sam / mobilesamv2).

@@ -15,6 +15,18 @@ pub struct CoarseFrame {
 const FOREGROUND_BAND: f32 = 0.03;
 
 impl CoarseFrame {
+    /// [`CoarseFrame::downscale`] of a validated segmenter input.
+    pub fn of_input(input: &crate::SegmenterInput, factor: usize) -> Self {
+        Self::downscale(
+            input.rgb,
+            input.depth,
+            input.depth_scale,
+            input.width as usize,
+            input.height as usize,
+            factor,
+        )
+    }
+
     /// Averages `factor` × `factor` blocks (partial blocks at the border too).
     /// Buffers must already be validated against `width` × `height`.
     pub fn downscale(

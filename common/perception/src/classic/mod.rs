@@ -2,19 +2,19 @@
 //! segmentation over colour, depth gaps and normal angles (METHOD.md §6).
 
 mod confidence;
-mod downscale;
+pub(crate) mod downscale;
 mod felzenszwalb;
-mod graph;
-mod labels;
-mod noise;
-mod normals;
-mod smoothing;
-mod union_find;
-mod upsample;
+pub(crate) mod graph;
+pub(crate) mod labels;
+pub(crate) mod noise;
+pub(crate) mod normals;
+pub(crate) mod smoothing;
+pub(crate) mod union_find;
+pub(crate) mod upsample;
 
 pub use graph::EdgeWeights;
 
-use crate::{PerceptionError, SegmentInfo, Segmentation, Segmenter, SegmenterInput};
+use crate::{PerceptionError, Segmentation, Segmenter, SegmenterInput};
 use downscale::CoarseFrame;
 use graph::{Edge, NoiseTolerance};
 use noise::DepthNoiseModel;
@@ -119,16 +119,8 @@ impl Segmenter for ClassicSegmenter {
     fn segment(&mut self, input: &SegmenterInput) -> Result<Segmentation, PerceptionError> {
         input.validate()?;
         let p = self.params;
-        let (width, height) = (input.width as usize, input.height as usize);
         let factor = p.downscale as usize;
-        let coarse = CoarseFrame::downscale(
-            input.rgb,
-            input.depth,
-            input.depth_scale,
-            width,
-            height,
-            factor,
-        );
+        let coarse = CoarseFrame::of_input(input, factor);
         let camera = coarse_camera(input, factor, coarse.width, coarse.height);
         let noise = DepthNoiseModel::estimate(&coarse.depth_m, coarse.width, coarse.height);
         let radius = p.smoothing_radius as usize;
@@ -170,45 +162,21 @@ impl Segmenter for ClassicSegmenter {
         let frame_seed = p.seed ^ self.frames_done.wrapping_mul(0x9e37_79b9_7f4a_7c15);
         self.frames_done += 1;
         let label_of_segment = labels::shuffled_label_ids(count, frame_seed);
-        let full = FullFrame {
-            width,
-            height,
-            rgb: input.rgb,
-            depth: input.depth,
-            depth_scale: input.depth_scale,
-        };
+        let full = FullFrame::of_input(input);
         let full_segments =
             upsample::upsample_segments(&full, &coarse, &segment_of, factor, &p.weights, &noise);
-        // Edge-aware upsampling can swallow a sliver segment: list painted ones only.
-        let mut painted = vec![false; count];
-        for &s in &full_segments {
-            painted[s as usize] = true;
-        }
-        let label_map: Vec<u32> = full_segments
-            .into_iter()
-            .map(|s| label_of_segment[s as usize])
-            .collect();
-        let mut table: Vec<SegmentInfo> = (0..count)
-            .filter(|&s| painted[s])
-            .map(|s| SegmentInfo {
-                label: label_of_segment[s],
-                confidence: confidence[s],
-                class: None,
-                score: 0.0,
-            })
-            .collect();
-        table.sort_unstable_by_key(|s| s.label);
-        Ok(Segmentation {
-            width: input.width,
-            height: input.height,
-            label_map,
-            labels: table,
-        })
+        Ok(labels::segmentation(
+            input.width,
+            input.height,
+            &full_segments,
+            &label_of_segment,
+            &confidence,
+        ))
     }
 }
 
 /// The input camera at the coarse grid (block centres as pixel centres).
-fn coarse_camera(
+pub(crate) fn coarse_camera(
     input: &SegmenterInput,
     factor: usize,
     width: usize,

@@ -15,6 +15,19 @@ pub struct FullFrame<'a> {
     pub depth_scale: f32,
 }
 
+impl<'a> FullFrame<'a> {
+    /// The buffers of a validated segmenter input.
+    pub fn of_input(input: &crate::SegmenterInput<'a>) -> Self {
+        Self {
+            width: input.width as usize,
+            height: input.height as usize,
+            rgb: input.rgb,
+            depth: input.depth,
+            depth_scale: input.depth_scale,
+        }
+    }
+}
+
 /// Segment index per full-resolution pixel.
 pub fn upsample_segments(
     full: &FullFrame,

@@ -28,7 +28,7 @@ enum BenchWhat {
         #[arg(long, default_value_t = 50)]
         runs: usize,
     },
-    /// Segmenters (classic, prior, tiny-model ensemble with `onnx`) per 640×480 synthetic frame.
+    /// Segmenters (geometry, classic, prior, tiny-model ensemble with `onnx`) per 640×480 synthetic frame.
     Segment {
         /// Frames to segment.
         #[arg(long, default_value_t = 8)]

@@ -30,7 +30,8 @@ pub struct RunArgs {
     /// machine and would starve the mapper (a slower replay, like `rosbag play -r`).
     #[arg(long)]
     pub max_rate: Option<f64>,
-    /// Segmenter to start with: classic (no weights), prior (ground truth), sam, mobilesamv2.
+    /// Segmenter to start with: geometry (depth-first, no weights), classic (graph-based, no
+    /// weights), prior (ground truth), sam, mobilesamv2.
     #[arg(long, value_parser = segmenter_kinds())]
     pub segmenter: Option<String>,
     /// Switch a consensus module off (repeatable), as in the paper's ablation table.

@@ -1,0 +1,236 @@
+//! The segmenter on hand-built depth images: objects come apart by
+//! geometry, one-coloured scenes included; texture never cuts.
+
+use std::collections::HashMap;
+
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+use super::scenes::*;
+use super::*;
+
+fn segment(r: &Rendered) -> Segmentation {
+    let input = SegmenterInput {
+        width: WIDTH,
+        height: HEIGHT,
+        rgb: &r.rgb,
+        depth: &r.depth,
+        depth_scale: DEPTH_SCALE,
+        intrinsics: r.intrinsics,
+        gt_labels: None,
+        classes: &[],
+    };
+    let mut segmenter = GeometrySegmenter::new(GeometryParams::default()).expect("valid params");
+    segmenter.segment(&input).expect("segmentation")
+}
+
+/// The label covering most of `object`'s pixels, the share of the object it
+/// covers, and the share of that label's pixels that are the object.
+fn dominant(seg: &Segmentation, r: &Rendered, object: usize) -> (u32, f32, f32) {
+    let mut counts: HashMap<u32, usize> = HashMap::new();
+    for (i, &o) in r.object.iter().enumerate() {
+        if o == object {
+            *counts.entry(seg.label_map[i]).or_default() += 1;
+        }
+    }
+    let total: usize = counts.values().sum();
+    let (label, n) = counts
+        .into_iter()
+        .max_by_key(|&(_, n)| n)
+        .expect("object visible");
+    let labelled = seg.label_map.iter().filter(|&&l| l == label).count();
+    (label, n as f32 / total as f32, n as f32 / labelled as f32)
+}
+
+/// Each object is mostly one label of its own, and the labels differ.
+fn assert_apart(seg: &Segmentation, r: &Rendered, objects: &[usize], what: &str) {
+    let found: Vec<(u32, f32, f32)> = objects.iter().map(|&o| dominant(seg, r, o)).collect();
+    for (&o, &(label, cover, purity)) in objects.iter().zip(&found) {
+        assert!(
+            label != 0 && cover > 0.8 && purity > 0.85,
+            "{what}: object {o} → label {label}, covers {cover:.2}, purity {purity:.2}"
+        );
+    }
+    for (i, a) in found.iter().enumerate() {
+        for b in &found[i + 1..] {
+            assert_ne!(a.0, b.0, "{what}: two objects share a segment: {found:?}");
+        }
+    }
+}
+
+fn cuboid(min: [f32; 3], max: [f32; 3], colour: [u8; 3]) -> (Shape, Paint) {
+    (Shape::Cuboid { min, max }, Paint::Plain(colour))
+}
+
+fn box_on_floor() -> Scene {
+    desk_view(vec![
+        floor(Paint::Plain(GREY)),
+        cuboid([-0.2, 0.0, 1.2], [0.2, 0.25, 1.5], GREY),
+    ])
+}
+
+#[test]
+fn box_on_a_plane_comes_apart_from_the_plane() {
+    // One colour everywhere: only geometry can separate them.
+    let r = box_on_floor().render();
+    assert_apart(&segment(&r), &r, &[0, 1], "box on floor");
+}
+
+#[test]
+fn box_on_a_plane_with_sensor_noise() {
+    // Kinect-like axial noise σ = 1.5 mm · z², then mm quantisation.
+    let mut r = box_on_floor().render();
+    let mut rng = ChaCha8Rng::seed_from_u64(18);
+    for d in r.depth.iter_mut().filter(|d| **d > 0) {
+        let z = *d as f32 / DEPTH_SCALE;
+        let (u1, u2): (f32, f32) = (rng.gen_range(1e-6..1.0), rng.gen());
+        let gauss = (-2.0 * u1.ln()).sqrt() * (std::f32::consts::TAU * u2).cos();
+        *d = ((z + 0.0015 * z * z * gauss) * DEPTH_SCALE).round() as u16;
+    }
+    assert_apart(&segment(&r), &r, &[0, 1], "noisy box on floor");
+}
+
+#[test]
+fn two_boxes_touching_side_by_side_come_apart() {
+    // Touching, one colour; the taller one's side face meets the shorter
+    // one's top and front in concave creases. (Equal boxes flush in height
+    // and front would be one flat surface: no RGB-D cue separates them.)
+    let r = desk_view(vec![
+        floor(Paint::Plain(GREY)),
+        cuboid([-0.4, 0.0, 1.2], [-0.1, 0.3, 1.5], GREY),
+        cuboid([-0.1, 0.0, 1.3], [0.2, 0.15, 1.6], GREY),
+    ])
+    .render();
+    assert_apart(&segment(&r), &r, &[0, 1, 2], "two boxes");
+}
+
+#[test]
+fn a_ball_on_a_box_comes_apart() {
+    let r = desk_view(vec![
+        floor(Paint::Plain(GREY)),
+        cuboid([-0.25, 0.0, 1.2], [0.25, 0.2, 1.6], GREY),
+        (
+            Shape::Sphere {
+                centre: [0.0, 0.32, 1.4],
+                radius: 0.12,
+            },
+            Paint::Plain(GREY),
+        ),
+    ])
+    .render();
+    assert_apart(&segment(&r), &r, &[0, 1, 2], "ball on box");
+}
+
+#[test]
+fn a_concave_wall_corner_splits() {
+    // Looking straight at an inside corner: wall z = 2 m, wall x = 0.4 m.
+    let r = Scene {
+        eye: [0.0, 0.0, 0.0],
+        pitch: 0.0,
+        objects: vec![
+            (
+                Shape::Plane {
+                    normal: [0.0, 0.0, 1.0],
+                    offset: 2.0,
+                },
+                Paint::Plain(WHITE),
+            ),
+            (
+                Shape::Plane {
+                    normal: [1.0, 0.0, 0.0],
+                    offset: 0.4,
+                },
+                Paint::Plain(WHITE),
+            ),
+        ],
+    }
+    .render();
+    assert_apart(&segment(&r), &r, &[0, 1], "wall corner");
+}
+
+#[test]
+fn a_checkered_plane_stays_one_segment() {
+    let r = desk_view(vec![floor(Paint::Checker(0.1, BLACK, WHITE))]).render();
+    let seg = segment(&r);
+    let (label, cover, _) = dominant(&seg, &r, 0);
+    assert!(
+        label != 0 && cover > 0.97,
+        "label {label} covers {cover:.3}"
+    );
+    assert!(seg.labels.len() <= 2, "{} segments", seg.labels.len());
+}
+
+#[test]
+fn a_flat_book_splits_by_colour_where_geometry_is_weak() {
+    // 2 cm high: below the depth-step threshold, so colour decides.
+    let r = desk_view(vec![
+        floor(Paint::Plain(WOOD)),
+        cuboid([-0.15, 0.0, 1.3], [0.15, 0.02, 1.55], WHITE),
+    ])
+    .render();
+    assert_apart(&segment(&r), &r, &[0, 1], "book on desk");
+}
+
+#[test]
+fn pixels_without_depth_take_the_surrounding_surface_or_none() {
+    let mut r = box_on_floor().render();
+    // A hole in the floor, away from the box.
+    let hole = |i: usize| {
+        let (x, y) = ((i % WIDTH as usize) as f32, (i / WIDTH as usize) as f32);
+        (x - 60.0).powi(2) + (y - 200.0).powi(2) < 256.0
+    };
+    let holes: Vec<usize> = (0..r.depth.len()).filter(|&i| hole(i)).collect();
+    assert!(holes.iter().all(|&i| r.object[i] == 0));
+    for &i in &holes {
+        r.depth[i] = 0;
+    }
+    let seg = segment(&r);
+    let (floor_label, _, _) = dominant(&seg, &r, 0);
+    assert!(holes.iter().all(|&i| seg.label_map[i] == floor_label));
+    // No depth at all: no segment, no error.
+    r.depth.iter_mut().for_each(|d| *d = 0);
+    let empty = segment(&r);
+    assert!(empty.label_map.iter().all(|&l| l == 0));
+    assert!(empty.labels.is_empty());
+}
+
+#[test]
+fn labels_table_and_confidence_are_consistent() {
+    let r = box_on_floor().render();
+    let seg = segment(&r);
+    let counts = seg.pixel_counts();
+    assert!(
+        counts.iter().all(|&n| n > 0),
+        "every listed label is painted"
+    );
+    assert!(seg
+        .label_map
+        .iter()
+        .all(|&l| l == 0 || seg.info(l).is_some()));
+    // The box is bounded by steps and a crease: a confident segment.
+    let (box_label, _, _) = dominant(&seg, &r, 1);
+    let confidence = seg.info(box_label).map(|s| s.confidence);
+    assert!(confidence.is_some_and(|c| c > 0.7), "{confidence:?}");
+}
+
+#[test]
+fn bad_sizes_and_parameters_are_errors() {
+    let r = box_on_floor().render();
+    let input = SegmenterInput {
+        width: WIDTH,
+        height: HEIGHT,
+        rgb: &r.rgb,
+        depth: &r.depth[1..],
+        depth_scale: DEPTH_SCALE,
+        intrinsics: r.intrinsics,
+        gt_labels: None,
+        classes: &[],
+    };
+    let mut segmenter = GeometrySegmenter::new(GeometryParams::default()).expect("valid");
+    assert!(segmenter.segment(&input).is_err());
+    let bad = GeometryParams {
+        cell: 0,
+        ..GeometryParams::default()
+    };
+    assert!(GeometrySegmenter::new(bad).is_err());
+}
