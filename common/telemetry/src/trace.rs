@@ -187,7 +187,9 @@ fn flows(events: &[Recorded], tracks: &[u32], us: impl Fn(u64) -> f64) -> Vec<Va
 /// Complete events (`X`) of a trace file's events that overlap another on the same track
 /// (pid, tid), as (earlier, later) indices; empty for a valid trace.
 pub fn overlapping_complete_events(events: &[Value]) -> Vec<(usize, usize)> {
-    let mut by_track: BTreeMap<(u64, u64), Vec<(f64, f64, usize)>> = BTreeMap::new();
+    /// Start, end (µs) and index of a complete event.
+    type Span = (f64, f64, usize);
+    let mut by_track: BTreeMap<(u64, u64), Vec<Span>> = BTreeMap::new();
     for (i, e) in events.iter().enumerate() {
         if e["ph"] != "X" {
             continue;
