@@ -3,7 +3,11 @@
 //! everything else (flat, convex) joins.
 
 use super::patches::{ContinuityMap, PatchStats, Patches, NO_PATCH};
-use crate::classic::normals::{dot, is_known, sub};
+use crate::classic::normals::{cross, dot, is_known, sub};
+
+/// |cos| between the centroid offset and the crease line above which the
+/// convexity sign is not trusted (LCCP's singular configuration, ~37°).
+const SINGULAR_COS: f32 = 0.8;
 
 /// Two adjacent patches and the pixel pairs along their shared boundary.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -106,8 +110,14 @@ impl BoundaryRules {
         {
             let d = sub(a.centroid, b.centroid);
             let bend = dot(a.normal, b.normal).clamp(-1.0, 1.0).acos();
-            // LCCP: convex when (n_a − n_b)·(x_a − x_b) > 0; normals face the camera.
-            let convex = dot(sub(a.normal, b.normal), d) > 0.0;
+            // LCCP: convex when (n_a − n_b)·(x_a − x_b) > 0; normals face the
+            // camera. Its sanity check: with x_a − x_b along the planes'
+            // intersection line (small patches side by side on a crease) the
+            // sign is noise, so such a boundary is not trusted as convex.
+            let line = cross(a.normal, b.normal);
+            let (d_len, line_len) = (dot(d, d).sqrt(), dot(line, line).sqrt());
+            let along_crease = dot(d, line).abs() > SINGULAR_COS * d_len * line_len;
+            let convex = !along_crease && dot(sub(a.normal, b.normal), d) > 0.0;
             if !convex {
                 let concavity = bend / self.concave_angle;
                 if concavity >= 1.0 {

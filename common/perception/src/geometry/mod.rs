@@ -6,15 +6,18 @@
 //! 1. Depth noise σ(1/z) from second differences, noise-gated smoothing,
 //!    back-projected points and normals (shared with `classic`).
 //! 2. Surface patches: each `cell` × `cell` block flood-filled over
-//!    4-neighbours without a depth step, a sharp normal change or a colour
-//!    edge; per patch the mean point x, unit normal n and colour. A step is
-//!    judged in inverse depth w = 1/z, affine on planes: the step misses
-//!    the line continued from either side by more than jump·w + kσ(w).
+//!    4-neighbours without a depth step, a colour edge, or a normal bent
+//!    by more than `patch_max_bend` from the patch's mean so far; per patch
+//!    the mean point x, unit normal n and colour. A step is judged in
+//!    inverse depth w = 1/z, affine on planes: the step misses the line
+//!    continued from either side by more than jump·w + kσ(w).
 //! 3. Every boundary between adjacent patches a, b gets a verdict:
 //!    - depth step: most boundary pixel pairs discontinuous → cut;
 //!    - LCCP convexity: convex iff (n_a − n_b)·(x_a − x_b) > 0 (normals
-//!      face the camera); concave with bend ∠(n_a, n_b) > θ → cut;
-//!      convex or flat → join (a box's faces, a ball, a wall stay whole);
+//!      face the camera), not trusted when x_a − x_b runs along the crease
+//!      line n_a × n_b (LCCP's sanity check); concave with bend
+//!      ∠(n_a, n_b) > θ → cut; convex or flat → join (a box's faces, a
+//!      ball, a wall stay whole); no normal → cut with no evidence;
 //!    - colour only where geometry is undecided: weak evidence (a bend
 //!      under θ, a plane offset |n·(x_a − x_b)| of parallel planes, a few
 //!      step pairs) plus a colour edge between the patch means → cut (a
@@ -31,8 +34,10 @@
 //! Decisions where the method is open:
 //! - Patches are grid cells split by continuity, not LCCP's supervoxels:
 //!   bounded size keeps a patch from leaking along a smooth crease, and
-//!   costs one pass. A patch that straddles a crease gets a blended normal;
-//!   it is cut from both sides and the small-piece rule gives it to one.
+//!   costs one pass. Growth is checked against the patch's mean normal,
+//!   so a smoothed crease (a few degrees per pixel) still stops it; what
+//!   straddles a crease gets a blended normal, is cut from both sides and
+//!   the small-piece rule gives it to one.
 //! - Two boxes of equal height touching flush form one flat, coplanar top:
 //!   no RGB-D cue separates them, so they stay one (as in LCCP).
 //! - Connected components, not a graph cut: one wrong join merges two
@@ -68,7 +73,7 @@ pub struct GeometryParams {
     pub cell: u32,
     /// Relative depth step (step / depth) between neighbours that separates.
     pub max_jump: f32,
-    /// Angle (radians) between neighbouring pixel normals that stops a patch.
+    /// Angle (radians) from the patch's mean normal that stops its growth.
     pub patch_max_bend: f32,
     /// Share of step pairs from which a patch boundary is a depth step.
     pub step_share: f32,
@@ -94,7 +99,7 @@ impl Default for GeometryParams {
             noise_sigmas: 3.0,
             cell: 8,
             max_jump: 0.04,
-            patch_max_bend: 0.6,
+            patch_max_bend: 0.35,
             step_share: 0.5,
             concave_angle: 0.26,
             offset_scale: 0.012,

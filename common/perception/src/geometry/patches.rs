@@ -16,7 +16,7 @@ pub struct Continuity {
     pub max_jump: f32,
     /// Noise dead zone in inverse depth (1/m): k·σ(1/z).
     pub inverse_noise: f32,
-    /// Below this cosine between pixel normals a patch does not grow.
+    /// Below this cosine to its mean normal so far a patch does not grow.
     pub min_normal_cos: f32,
     /// Nor across this RGB distance (channels 0..1): a patch never
     /// straddles a colour edge, so colour can still decide between patches.
@@ -91,6 +91,10 @@ impl Continuity {
     }
 }
 
+fn add(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
+    [a[0] + b[0], a[1] + b[1], a[2] + b[2]]
+}
+
 /// Mean geometry and colour of one patch; `normal` is zero when none of
 /// its pixels had a normal.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
@@ -122,11 +126,15 @@ pub fn build_patches(
     let mut of = vec![NO_PATCH; w * h];
     let mut count = 0u32;
     let mut stack = Vec::new();
-    let joins = |a: usize, b: usize| {
-        let (na, nb) = (geo.normals[a], geo.normals[b]);
+    // Normals are compared with the patch's running mean, not pixel to
+    // pixel: a smoothed crease bends a little per pixel but a lot from the
+    // patch, and the mean is steadier under noise than one seed pixel.
+    let joins = |sum: [f32; 3], a: usize, b: usize| {
+        let nb = geo.normals[b];
         let dc = sub(frame.rgb[a], frame.rgb[b]);
+        let len = dot(sum, sum).sqrt();
         steps.joins(a, b, w)
-            && (!is_known(na) || !is_known(nb) || dot(na, nb) >= continuity.min_normal_cos)
+            && (len <= 1e-6 || !is_known(nb) || dot(sum, nb) >= continuity.min_normal_cos * len)
             && dot(dc, dc) <= continuity.max_colour * continuity.max_colour
     };
     for cy in (0..h).step_by(cell) {
@@ -139,6 +147,7 @@ pub fn build_patches(
                         continue;
                     }
                     of[seed] = count;
+                    let mut normal_sum = geo.normals[seed];
                     stack.push(seed);
                     while let Some(i) = stack.pop() {
                         let (px, py) = (i % w, i / w);
@@ -149,8 +158,9 @@ pub fn build_patches(
                             (py + 1 < y1).then(|| i + w),
                         ];
                         for j in neighbours.into_iter().flatten() {
-                            if of[j] == NO_PATCH && joins(i, j) {
+                            if of[j] == NO_PATCH && joins(normal_sum, i, j) {
                                 of[j] = count;
+                                normal_sum = add(normal_sum, geo.normals[j]);
                                 stack.push(j);
                             }
                         }
