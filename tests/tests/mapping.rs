@@ -3,7 +3,7 @@
 use std::process::Command;
 use std::time::{Duration, Instant};
 
-use opengs_e2e::{interrupt, opengs_run, serial, stage_pid, Guard};
+use opengs_e2e::{binary, ctl_status, interrupt, opengs_run, serial, stage_pid, Guard};
 
 #[test]
 fn killed_mapper_resumes_from_its_checkpoint() {
@@ -171,6 +171,12 @@ fn final_optimisation_runs_after_the_data_and_ctrl_c_keeps_its_map() {
         );
         std::thread::sleep(Duration::from_millis(100));
     }
+    // The supervisor answers while the mapper finishes (it used to time out here).
+    let status = ctl_status(&run_id).expect("ctl status answers during the final work");
+    assert!(
+        status["stages"].as_array().is_some_and(|s| !s.is_empty()),
+        "{status}"
+    );
     let status = interrupt(&mut run.0, Duration::from_secs(30));
     assert_eq!(status.code(), Some(130), "interrupted, outputs kept");
     let stats = mapper_stats(&out);
@@ -187,4 +193,51 @@ fn final_optimisation_runs_after_the_data_and_ctrl_c_keeps_its_map() {
         opengs_runtime::leftover_files(&run_id),
         Vec::<std::path::PathBuf>::new()
     );
+
+    // `opengs ctl stop` during the final work: a requested end (exit 0), the map so far kept.
+    let out = dir.path().join("stopped");
+    let run_id = format!("t{}-finish-stop", std::process::id());
+    let mut run = Guard(
+        finishing_run(&deploy, &out, &run_id, 1_000_000)
+            .spawn()
+            .expect("run starts"),
+    );
+    let deadline = Instant::now() + Duration::from_secs(120);
+    let log = out.join("logs/mapper.log");
+    while !std::fs::read_to_string(&log)
+        .is_ok_and(|l| l.contains("end of data: final optimisation"))
+    {
+        assert!(
+            Instant::now() < deadline,
+            "final optimisation never started"
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    let stop = Command::new(binary("opengs"))
+        .args(["ctl", "--run", &run_id, "stop"])
+        .output()
+        .expect("ctl stop");
+    assert!(
+        stop.status.success(),
+        "{}",
+        String::from_utf8_lossy(&stop.stderr)
+    );
+    let deadline = Instant::now() + Duration::from_secs(30);
+    let status = loop {
+        if let Some(s) = run.0.try_wait().expect("wait") {
+            break s;
+        }
+        assert!(
+            Instant::now() < deadline,
+            "ctl stop was ignored during the final work"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    };
+    assert_eq!(status.code(), Some(0), "a requested stop");
+    let stats = mapper_stats(&out);
+    let done = stats["final_optimisation"]["iterations"]
+        .as_u64()
+        .expect("iterations");
+    assert!(done > 0 && done < 1_000_000, "{stats}");
+    assert!(out.join("map.ply").exists(), "map.ply kept");
 }

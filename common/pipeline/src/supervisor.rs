@@ -110,7 +110,9 @@ impl Supervisor {
                 .and_then(|ending| {
                     streaming_s = Some(started.elapsed().as_secs_f64());
                     match ending {
-                        Ending::EndOfData if opts.finish_after_data => state.finish_stages(&ch),
+                        Ending::EndOfData if opts.finish_after_data => {
+                            state.finish_stages(&ch, started)
+                        }
                         other => Ok(other),
                     }
                 });
@@ -635,7 +637,8 @@ impl RunState {
 
     /// After the end of data, lets the stages with a `finish_timeout_s` do their final work
     /// (SIGUSR1) and waits for them to exit, showing their progress. Ctrl-C stops the wait.
-    fn finish_stages(&mut self, ch: &Channels) -> anyhow::Result<Ending> {
+    /// `ctl status` is answered meanwhile, and `ctl stop` ends the wait as Ctrl-C does.
+    fn finish_stages(&mut self, ch: &Channels, started: Instant) -> anyhow::Result<Ending> {
         let finishing: Vec<usize> = (0..self.stages.len())
             .filter(|&i| self.stages[i].spec.finish_timeout_s > 0.0 && self.stages[i].is_running())
             .collect();
@@ -647,6 +650,7 @@ impl RunState {
         let _g = ws
             .attach_notification(ch.telemetry.listener())
             .map_err(err)?;
+        let _c = ws.attach_notification(ch.control.listener()).map_err(err)?;
         let _tick = ws
             .attach_interval(Duration::from_millis(200))
             .map_err(err)?;
@@ -665,6 +669,10 @@ impl RunState {
                 return Ok(Ending::Interrupted);
             }
             self.handle_telemetry(ch);
+            if self.handle_control(ch, started) {
+                self.note("stop requested: stopping the final work (what is done is kept)");
+                return Ok(Ending::StopRequested);
+            }
             let mut waiting = 0;
             for &i in &finishing {
                 let stage = &mut self.stages[i];
