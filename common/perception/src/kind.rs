@@ -11,7 +11,6 @@ use crate::{
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
 pub enum SegmenterKind {
     /// Graph-based colour + depth + normal segmentation, no weights.
-    #[default]
     Classic,
     /// Ground-truth instance labels of the dataset ("Ours(Prior)").
     Prior,
@@ -20,7 +19,8 @@ pub enum SegmenterKind {
     /// MobileSAMv2 (ONNX).
     MobileSamV2,
     /// Depth-first object partitioning by local convexity (LCCP-style), no
-    /// weights; colour only where geometry is undecided.
+    /// weights; colour only where geometry is undecided. The default.
+    #[default]
     Geometry,
 }
 

@@ -40,14 +40,18 @@ fn input<'a>(b: &'a Buffers, w: u32, h: u32) -> SegmenterInput<'a> {
 }
 
 fn run_all(input: &SegmenterInput) -> Vec<Result<(), PerceptionError>> {
-    [SegmenterKind::Classic, SegmenterKind::Prior]
-        .iter()
-        .map(|kind| kind.create().and_then(|mut s| s.segment(input)).map(|_| ()))
-        .collect()
+    [
+        SegmenterKind::Geometry,
+        SegmenterKind::Classic,
+        SegmenterKind::Prior,
+    ]
+    .iter()
+    .map(|kind| kind.create().and_then(|mut s| s.segment(input)).map(|_| ()))
+    .collect()
 }
 
 #[test]
-fn well_formed_input_runs_on_both_segmenters() {
+fn well_formed_input_runs_on_every_weight_free_segmenter() {
     let b = buffers(32, 24);
     assert!(run_all(&input(&b, 32, 24)).iter().all(Result::is_ok));
 }

@@ -20,7 +20,7 @@ use crate::DatasetArgs;
 pub struct SegmenterArgs {
     /// geometry (depth-first, no weights), classic (graph-based, no weights), prior (ground
     /// truth), sam or mobilesamv2 (ONNX models).
-    #[arg(long, default_value = "classic")]
+    #[arg(long, default_value = "geometry")]
     pub kind: String,
     /// SAM-family image encoder ONNX (for sam / mobilesamv2).
     #[arg(long)]
