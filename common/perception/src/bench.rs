@@ -28,9 +28,12 @@ struct BenchFrames {
     classes: Vec<opengs_datasets::InstanceClass>,
 }
 
-/// `frames` synthetic frames spread over the loop.
-fn bench_frames(frames: usize) -> Result<BenchFrames, PerceptionError> {
-    let mut source = open_dataset(&DatasetSpec::new(DatasetKind::Synthetic))?;
+/// `frames` synthetic frames spread over the loop of the suite's `scene`
+/// (0 = the fixed room).
+fn bench_frames(frames: usize, scene: u64) -> Result<BenchFrames, PerceptionError> {
+    let mut spec = DatasetSpec::new(DatasetKind::Synthetic);
+    spec.synthetic.scene = scene;
+    let mut source = open_dataset(&spec)?;
     let step = (source.len() / frames.max(1)).max(1);
     let list = (0..frames.max(1))
         .map(|i| source.frame((i * step) % source.len()))
@@ -80,7 +83,7 @@ pub fn time_segmenters(
     frames: usize,
     repeats: usize,
 ) -> Result<Vec<SegmentTiming>, PerceptionError> {
-    let bench = bench_frames(frames)?;
+    let bench = bench_frames(frames, 0)?;
     [
         SegmenterKind::Geometry,
         SegmenterKind::Classic,
@@ -101,7 +104,7 @@ pub fn time_tiny_ensemble(frames: usize, repeats: usize) -> Result<SegmentTiming
         time_one(
             "tiny-ensemble",
             segmenter.as_mut(),
-            &bench_frames(frames)?,
+            &bench_frames(frames, 0)?,
             repeats,
         )
     })();
@@ -146,6 +149,76 @@ pub fn print_segment_bench(frames: usize, repeats: usize) -> Result<(), Percepti
     println!(
         "segment/tiny-ensemble skipped: built without the `onnx` feature (--features opengs-perception/onnx)"
     );
+    Ok(())
+}
+
+/// Per-frame quality of one segmenter over the bench frames (means), and
+/// its median time.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SegmentQuality {
+    pub name: String,
+    pub frames: usize,
+    pub miou: f64,
+    pub split_share: f64,
+    pub merge_share: f64,
+    pub segments: f64,
+    pub median_ms: f64,
+}
+
+/// Scores geometry, classic and prior on `frames` frames of `scene`
+/// against the ground-truth instances ([`crate::quality`]).
+pub fn segment_quality(frames: usize, scene: u64) -> Result<Vec<SegmentQuality>, PerceptionError> {
+    let bench = bench_frames(frames, scene)?;
+    let kinds = [
+        SegmenterKind::Geometry,
+        SegmenterKind::Classic,
+        SegmenterKind::Prior,
+    ];
+    kinds
+        .into_iter()
+        .map(|kind| {
+            let mut segmenter = kind.create()?;
+            let mut times = Vec::new();
+            let mut scores = Vec::new();
+            for frame in &bench.frames {
+                let input = SegmenterInput::from_frame(frame, bench.intrinsics, &bench.classes);
+                let truth = input.gt_labels.ok_or(PerceptionError::MissingLabels)?;
+                let start = Instant::now();
+                let out = segmenter.segment(&input)?;
+                times.push(start.elapsed().as_secs_f64() * 1e3);
+                scores.extend(crate::quality::frame_quality(&out.label_map, truth));
+            }
+            times.sort_unstable_by(f64::total_cmp);
+            let n = scores.len().max(1) as f64;
+            let mean =
+                |f: fn(&crate::quality::FrameQuality) -> f64| scores.iter().map(f).sum::<f64>() / n;
+            Ok(SegmentQuality {
+                name: kind.as_str().to_string(),
+                frames: scores.len(),
+                miou: mean(|q| q.miou),
+                split_share: mean(|q| q.split_share),
+                merge_share: mean(|q| q.merge_share),
+                segments: mean(|q| q.segments as f64),
+                median_ms: times.get(times.len() / 2).copied().unwrap_or(0.0),
+            })
+        })
+        .collect()
+}
+
+/// Prints [`segment_quality`] as one line per segmenter.
+pub fn print_segment_quality(frames: usize, scene: u64) -> Result<(), PerceptionError> {
+    for q in segment_quality(frames, scene)? {
+        println!(
+            "quality/{:<9} scene {scene}: per-frame mIoU {:6.2}  objects split {:5.1} %  segments merging objects {:5.1} %  {:.1} segments  median {:6.2} ms  ({} frames with objects)",
+            q.name,
+            q.miou,
+            100.0 * q.split_share,
+            100.0 * q.merge_share,
+            q.segments,
+            q.median_ms,
+            q.frames,
+        );
+    }
     Ok(())
 }
 
@@ -231,5 +304,26 @@ mod tiny {
             threads: 2,
             ..SegmenterOptions::default()
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn quality_scores_truth_perfect_and_geometry_above_classic() {
+        let q = segment_quality(3, 0).expect("synthetic room");
+        let by_name = |name: &str| q.iter().find(|q| q.name == name).expect(name);
+        let prior = by_name("prior");
+        assert_eq!(prior.frames, 3);
+        assert!((prior.miou - 100.0).abs() < 1e-9, "{prior:?}");
+        assert_eq!((prior.split_share, prior.merge_share), (0.0, 0.0));
+        // Classic cuts the room's textures into patches; geometry does not.
+        let (geometry, classic) = (by_name("geometry"), by_name("classic"));
+        assert!(
+            geometry.miou > classic.miou + 10.0 && geometry.split_share < classic.split_share,
+            "{geometry:?} vs {classic:?}"
+        );
     }
 }

@@ -24,6 +24,7 @@ pub mod model_check;
 mod model_paths;
 pub mod npy;
 mod prior;
+pub mod quality;
 #[cfg(feature = "onnx")]
 pub mod sam;
 mod segmentation;

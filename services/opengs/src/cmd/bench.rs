@@ -36,6 +36,13 @@ enum BenchWhat {
         /// Repeats per frame.
         #[arg(long, default_value_t = 3)]
         repeats: usize,
+        /// Instead of timing alone: per-frame quality against the ground-truth instances
+        /// (Hungarian mIoU, split and merge shares, ms per frame) of geometry, classic, prior.
+        #[arg(long)]
+        quality: bool,
+        /// With --quality: room of the scene suite (0 = the fixed room).
+        #[arg(long, default_value_t = 0)]
+        scene: u64,
     },
 }
 
@@ -50,8 +57,21 @@ pub fn run(args: BenchArgs) -> anyhow::Result<()> {
             opengs_semantics::bench::print_consensus_bench(runs);
             Ok(())
         }
-        BenchWhat::Segment { frames, repeats } => Ok(
-            opengs_perception::bench::print_segment_bench(frames, repeats)?,
-        ),
+        BenchWhat::Segment {
+            frames,
+            repeats,
+            quality: false,
+            ..
+        } => Ok(opengs_perception::bench::print_segment_bench(
+            frames, repeats,
+        )?),
+        BenchWhat::Segment {
+            frames,
+            quality: true,
+            scene,
+            ..
+        } => Ok(opengs_perception::bench::print_segment_quality(
+            frames, scene,
+        )?),
     }
 }
