@@ -101,11 +101,11 @@ impl Default for GeometryParams {
             max_jump: 0.04,
             patch_max_bend: 0.35,
             step_share: 0.5,
-            concave_angle: 0.26,
+            concave_angle: 0.2,
             offset_scale: 0.012,
             weak_evidence: 0.35,
             colour_cut: 0.3,
-            min_pixels: 60,
+            min_pixels: 40,
             seed: 0x6e0_5e9,
         }
     }
