@@ -96,7 +96,7 @@ impl Default for GeometryParams {
         Self {
             downscale: 2,
             smoothing_radius: 2,
-            noise_sigmas: 3.0,
+            noise_sigmas: 5.0,
             cell: 8,
             max_jump: 0.04,
             patch_max_bend: 0.35,
