@@ -105,6 +105,28 @@ fn finishing_run(
     cmd
 }
 
+/// A run whose final optimisation (1,000,000 steps) is far too long to finish, returned once
+/// the mapper has started it.
+fn run_into_final_work(deploy: &std::path::Path, out: &std::path::Path, run_id: &str) -> Guard {
+    let run = Guard(
+        finishing_run(deploy, out, run_id, 1_000_000)
+            .spawn()
+            .expect("run starts"),
+    );
+    let deadline = Instant::now() + Duration::from_secs(120);
+    let log = out.join("logs/mapper.log");
+    while !std::fs::read_to_string(&log)
+        .is_ok_and(|l| l.contains("end of data: final optimisation"))
+    {
+        assert!(
+            Instant::now() < deadline,
+            "final optimisation never started"
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    run
+}
+
 fn mapper_stats(out: &std::path::Path) -> serde_json::Value {
     serde_json::from_str(&std::fs::read_to_string(out.join("mapper.json")).expect("mapper.json"))
         .expect("json")
@@ -155,22 +177,7 @@ fn final_optimisation_runs_after_the_data_and_ctrl_c_keeps_its_map() {
     // Ctrl-C during a final optimisation far too long to finish: the map so far is written.
     let out = dir.path().join("interrupted");
     let run_id = format!("t{}-finish-int", std::process::id());
-    let mut run = Guard(
-        finishing_run(&deploy, &out, &run_id, 1_000_000)
-            .spawn()
-            .expect("run starts"),
-    );
-    let deadline = Instant::now() + Duration::from_secs(120);
-    let log = out.join("logs/mapper.log");
-    while !std::fs::read_to_string(&log)
-        .is_ok_and(|l| l.contains("end of data: final optimisation"))
-    {
-        assert!(
-            Instant::now() < deadline,
-            "final optimisation never started"
-        );
-        std::thread::sleep(Duration::from_millis(100));
-    }
+    let mut run = run_into_final_work(&deploy, &out, &run_id);
     // The supervisor answers while the mapper finishes (it used to time out here).
     let status = ctl_status(&run_id).expect("ctl status answers during the final work");
     assert!(
@@ -197,22 +204,7 @@ fn final_optimisation_runs_after_the_data_and_ctrl_c_keeps_its_map() {
     // `opengs ctl stop` during the final work: a requested end (exit 0), the map so far kept.
     let out = dir.path().join("stopped");
     let run_id = format!("t{}-finish-stop", std::process::id());
-    let mut run = Guard(
-        finishing_run(&deploy, &out, &run_id, 1_000_000)
-            .spawn()
-            .expect("run starts"),
-    );
-    let deadline = Instant::now() + Duration::from_secs(120);
-    let log = out.join("logs/mapper.log");
-    while !std::fs::read_to_string(&log)
-        .is_ok_and(|l| l.contains("end of data: final optimisation"))
-    {
-        assert!(
-            Instant::now() < deadline,
-            "final optimisation never started"
-        );
-        std::thread::sleep(Duration::from_millis(100));
-    }
+    let mut run = run_into_final_work(&deploy, &out, &run_id);
     let stop = Command::new(binary("opengs"))
         .args(["ctl", "--run", &run_id, "stop"])
         .output()
