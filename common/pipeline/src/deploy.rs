@@ -1,5 +1,6 @@
 //! Deploy files: which stage processes to start, in which order, pinned how.
 
+use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use serde::Deserialize;
@@ -53,11 +54,50 @@ pub struct StageSpec {
     pub dataset: bool,
     /// For swappable stages: the implementation to run (`--kind KIND`), changed by `opengs ctl swap`.
     pub kind: Option<String>,
+    /// Each kind's own arguments (its model files), added after `args` while that kind runs:
+    /// `[stages.kinds.sam]` `args = [...]`. A kind without an entry gets `args` alone.
+    #[serde(default)]
+    pub kinds: BTreeMap<String, KindSpec>,
     /// Seconds this stage may work on after the end of the data (the mapper's final
     /// optimisation): it gets SIGUSR1, and the others are stopped once it exits or this
     /// runs out. 0 = none; Ctrl-C always stops at once.
     #[serde(default)]
     pub finish_timeout_s: f64,
+}
+
+/// The arguments of one kind of a swappable stage.
+#[derive(Debug, Clone, Default, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct KindSpec {
+    #[serde(default)]
+    pub args: Vec<String>,
+}
+
+impl StageSpec {
+    /// The deploy file's arguments for the kind this spec runs: `args`, then the kind's own.
+    pub fn kind_args(&self) -> Vec<String> {
+        let own = self
+            .kind
+            .as_ref()
+            .and_then(|k| self.kinds.get(k))
+            .map(|k| k.args.as_slice())
+            .unwrap_or_default();
+        self.args.iter().chain(own).cloned().collect()
+    }
+
+    /// Refuses kinds outside `known` in `kind` and `[stages.kinds.*]` (typos would otherwise
+    /// surface only when a swap starts the misspelt kind).
+    pub fn check_kinds(&self, known: &[&str]) -> Result<(), String> {
+        let named = self.kind.iter().chain(self.kinds.keys());
+        match named.into_iter().find(|k| !known.contains(&k.as_str())) {
+            Some(k) => Err(format!(
+                "stage '{}': unknown kind '{k}' (expected one of {})",
+                self.name,
+                known.join(", ")
+            )),
+            None => Ok(()),
+        }
+    }
 }
 
 /// A stage's scheduling policy. A niced stage still delays the tracker: each wake-up of
@@ -186,6 +226,12 @@ impl DeployFile {
             if !names.insert(&s.name) {
                 return Err(invalid(format!("stage '{}' appears twice", s.name)));
             }
+            if !s.kinds.is_empty() && s.kind.is_none() {
+                return Err(invalid(format!(
+                    "stage '{}': [stages.kinds.*] needs `kind`, the one to start with",
+                    s.name
+                )));
+            }
             if !(-20..=19).contains(&s.nice) {
                 return Err(invalid(format!(
                     "stage '{}': nice {} outside -20..19",
@@ -282,5 +328,60 @@ mod tests {
             .expect_err("nice")
             .to_string()
             .contains("nice"));
+    }
+
+    #[test]
+    fn each_kind_gets_its_own_arguments() {
+        let p = Path::new("x.toml");
+        let text = r#"
+            [[stages]]
+            name = "segmenter"
+            binary = "opengs-segmenter"
+            kind = "sam"
+            args = ["--tagger", "t.onnx"]
+            [stages.kinds.sam]
+            args = ["--encoder", "vit_h.onnx"]
+            [stages.kinds.mobilesamv2]
+            args = ["--encoder", "mobile.onnx", "--proposals", "boxes.onnx"]
+            [[stages]]
+            name = "sensor"
+            binary = "opengs-sensor"
+            role = "source"
+        "#;
+        let d = DeployFile::parse(text, p).expect("parses");
+        let mut seg = d.stages[0].clone();
+        assert_eq!(
+            seg.kind_args(),
+            ["--tagger", "t.onnx", "--encoder", "vit_h.onnx"]
+        );
+        seg.kind = Some("mobilesamv2".into());
+        assert_eq!(
+            seg.kind_args(),
+            [
+                "--tagger",
+                "t.onnx",
+                "--encoder",
+                "mobile.onnx",
+                "--proposals",
+                "boxes.onnx"
+            ]
+        );
+        // A kind without its own set runs with the shared arguments alone.
+        seg.kind = Some("geometry".into());
+        assert_eq!(seg.kind_args(), ["--tagger", "t.onnx"]);
+        let known = ["geometry", "sam", "mobilesamv2"];
+        assert!(seg.check_kinds(&known).is_ok());
+        let err = seg.check_kinds(&["geometry", "sam"]).expect_err("unknown");
+        assert!(err.contains("unknown kind 'mobilesamv2'"), "{err}");
+
+        let no_kind = text.replace("kind = \"sam\"\n", "");
+        let err = DeployFile::parse(&no_kind, p).expect_err("kinds without kind");
+        assert!(err.to_string().contains("needs `kind`"), "{err}");
+        let typo = text.replace(
+            "[stages.kinds.sam]\n            args",
+            "[stages.kinds.sam]\n            arg",
+        );
+        let err = DeployFile::parse(&typo, p).expect_err("typo");
+        assert!(err.to_string().contains("arg"), "{err}");
     }
 }

@@ -21,6 +21,7 @@ pub mod stage_main;
 pub mod stage_process;
 pub mod status;
 pub mod supervisor;
+pub mod swap;
 pub mod tracker_stage;
 
 pub use dataset_args::DatasetArgs;

@@ -41,6 +41,17 @@ pub struct RunSummary {
 /// failed for good is an error, reported after the outputs so far are written.
 pub fn run(opts: RunOptions) -> anyhow::Result<RunSummary> {
     let started = Instant::now();
+    let segmenter_kinds = opengs_perception::SegmenterKind::ALL.map(|k| k.as_str());
+    for stage in opts
+        .deploy
+        .stages
+        .iter()
+        .filter(|s| s.name == stage_names::SEGMENTER)
+    {
+        stage
+            .check_kinds(&segmenter_kinds)
+            .map_err(anyhow::Error::msg)?;
+    }
     let supervised = Supervisor::supervise(&opts)?;
     let run_dir = RunDir::new(&opts.out_dir);
     // Outputs are written on every path: nothing produced is lost.

@@ -109,7 +109,7 @@ impl StageProcess {
             })?;
         let log_err = log.try_clone()?;
         let mut cmd = Command::new(&binary);
-        cmd.args(&self.spec.args)
+        cmd.args(self.spec.kind_args())
             .args(extra)
             .stdin(Stdio::null())
             .stdout(log)
@@ -204,6 +204,14 @@ impl StageProcess {
 
     pub fn restart_due(&self) -> bool {
         self.state == StageState::Restarting && self.restart_at.is_some_and(|t| Instant::now() >= t)
+    }
+
+    /// SIGTERM without waiting: the stage ends after the message it is working on.
+    pub fn request_stop(&mut self) {
+        self.signal(opengs_runtime::STOP_SIGNAL);
+        if self.state != StageState::Finished {
+            self.state = StageState::Stopped;
+        }
     }
 
     /// SIGTERM, then SIGKILL after `grace`; waits for the process to end.

@@ -26,6 +26,7 @@ use crate::run_options::{RunOptions, StageFlags};
 use crate::run_record::StageRecord;
 use crate::stage_process::{StageProcess, StageState};
 use crate::status::{PipelineStatus, StageStatus};
+use crate::swap::{Swap, SwapOutcome, SwapStep};
 
 /// Why supervision ended.
 #[derive(Debug, PartialEq)]
@@ -117,7 +118,7 @@ impl Supervisor {
                     }
                 });
             // Stop in order whatever happened: the source first, so consumers see the end.
-            state.stop_all();
+            state.stop_all(&ch);
             // Collect what the stages sent before they exited.
             state.drain(&ch);
             result
@@ -171,16 +172,7 @@ struct RunState {
     progress: Option<Progress>,
     dataset_args: Vec<String>,
     log_dir: PathBuf,
-    swap: Option<PendingSwap>,
-}
-
-/// A make-before-break swap in progress: the new process runs beside the old one until ready.
-struct PendingSwap {
-    index: usize,
-    process: StageProcess,
-    ready: bool,
-    request_id: u64,
-    started: Instant,
+    swap: Option<Swap>,
 }
 
 impl RunState {
@@ -369,14 +361,16 @@ impl RunState {
                 }
             };
             let name = h.stage_name().to_string();
-            if let Some(swap) = &mut self.swap {
-                if event == TelemetryEvent::Ready && swap.process.pid() == Some(h.pid) {
-                    swap.ready = true;
-                }
-            }
             let Some(i) = self.stage_index(&name) else {
                 continue;
             };
+            if let Some(swap) = self.swap.as_mut().filter(|s| s.index == i) {
+                match event {
+                    TelemetryEvent::Ready => swap.observe_ready(h.pid),
+                    TelemetryEvent::Processed => swap.observe_output(h.pid, h.end_ns),
+                    _ => {}
+                }
+            }
             let stage = &mut self.stages[i];
             match event {
                 TelemetryEvent::Ready => {
@@ -462,7 +456,7 @@ impl RunState {
         stop
     }
 
-    /// Starts the replacement process of a `swap STAGE KIND` request.
+    /// Starts the replacement process of a `swap STAGE KIND` request (see [`crate::swap`]).
     fn begin_swap(&mut self, text: &str, request_id: u64) -> Result<(), String> {
         let mut words = text.split_whitespace();
         let (Some(stage), Some(kind), None) = (words.next(), words.next(), words.next()) else {
@@ -475,10 +469,10 @@ impl RunState {
             .stage_index(stage)
             .ok_or_else(|| format!("no stage '{stage}' in this pipeline"))?;
         let current = &self.stages[index];
-        if current.spec.kind.is_none() {
+        let Some(from) = current.spec.kind.clone() else {
             return Err(format!("stage '{stage}' has no kinds to swap"));
-        }
-        if current.spec.kind.as_deref() == Some(kind) {
+        };
+        if from == kind {
             return Err(format!("stage '{stage}' already runs '{kind}'"));
         }
         let mut spec = current.spec.clone();
@@ -487,68 +481,33 @@ impl RunState {
         let args = self.args_for_process(&process);
         process.spawn(&args).map_err(|e| e.to_string())?;
         self.note(&format!(
-            "swap {stage}: starting '{kind}' (pid {}) beside the running one",
+            "swap {stage}: starting '{kind}' (pid {}) beside the running '{from}'",
             process.pid().unwrap_or(0)
         ));
-        self.swap = Some(PendingSwap {
-            index,
-            process,
-            ready: false,
-            request_id,
-            started: Instant::now(),
-        });
+        self.swap = Some(Swap::new(index, request_id, &from, process));
         Ok(())
     }
 
-    /// Completes (new process ready: stop the old one) or abandons a pending swap.
+    /// Moves a pending swap on, and answers its `ctl swap` once it is over.
     fn advance_swap(&mut self, ch: &Channels) {
         let Some(swap) = &mut self.swap else { return };
-        let failed = if let Some(status) = swap.process.poll_exit() {
-            Some(format!(
-                "the new process exited ({status}); see {}",
-                swap.process.log_path().display()
-            ))
-        } else if !swap.ready
-            && swap.started.elapsed().as_secs_f64() > self.deploy.startup_timeout_s
-        {
-            Some(format!(
-                "the new process was not ready within {} s",
-                self.deploy.startup_timeout_s
-            ))
-        } else {
-            None
-        };
-        let (ok, text) = match failed {
-            Some(why) => (false, why),
-            None if swap.ready => (true, String::new()),
-            None => return,
-        };
-        let Some(mut swap) = self.swap.take() else {
-            return;
-        };
-        let text = if ok {
-            let old = &mut self.stages[swap.index];
-            let from = old.spec.kind.clone().unwrap_or_default();
-            old.stop(Duration::from_secs(5));
-            // The stage keeps its history; only the process and kind change.
-            swap.process.restarts = old.restarts;
-            swap.process.processed = old.processed;
-            swap.process.last_seq = old.last_seq;
-            swap.process.state = StageState::Ready;
-            let to = swap.process.spec.kind.clone().unwrap_or_default();
-            let name = swap.process.spec.name.clone();
-            self.stages[swap.index] = swap.process;
-            self.note(&format!("swap {name}: '{from}' → '{to}' done"));
-            format!("swapped {name} from {from} to {to}")
-        } else {
-            swap.process.stop(Duration::from_secs(1));
-            self.note(&format!("swap failed: {text}"));
-            text
-        };
-        let body = serde_json::Value::String(text).to_string();
-        let reply = ControlHeader::new(ControlCommand::Reply, swap.request_id, ok, &body);
-        if let Err(e) = ch.replies.send(reply, |h, buf| h.encode(&body, buf)) {
-            tracing::warn!("control reply: {e}");
+        let mut notes = Vec::new();
+        let timeout = Duration::from_secs_f64(self.deploy.startup_timeout_s);
+        let step = swap.advance(&mut self.stages[swap.index], timeout, &mut notes);
+        match step {
+            SwapStep::Waiting => {}
+            SwapStep::Promote(process) => {
+                let old = std::mem::replace(&mut self.stages[swap.index], *process);
+                swap.retire(old);
+            }
+            SwapStep::Done(outcome) => {
+                let request_id = swap.request_id;
+                self.swap = None;
+                reply_swap(ch, request_id, &outcome);
+            }
+        }
+        for n in notes {
+            self.note(&n);
         }
     }
 
@@ -723,9 +682,10 @@ impl RunState {
     }
 
     /// Stops every running stage, the source first.
-    fn stop_all(&mut self) {
-        if let Some(mut swap) = self.swap.take() {
-            swap.process.stop(Duration::from_secs(1));
+    fn stop_all(&mut self, ch: &Channels) {
+        if let Some(swap) = self.swap.take() {
+            let request_id = swap.request_id;
+            reply_swap(ch, request_id, &swap.abandon());
         }
         let order: Vec<usize> = (0..self.stages.len()).rev().collect();
         for i in order {
@@ -749,5 +709,14 @@ impl RunState {
             Some(p) => p.println(msg),
             None => eprintln!("{msg}"),
         }
+    }
+}
+
+/// Answers a `ctl swap` with its outcome (JSON), ok only when the swap succeeded.
+fn reply_swap(ch: &Channels, request_id: u64, outcome: &SwapOutcome) {
+    let body = serde_json::to_string(outcome).unwrap_or_default();
+    let reply = ControlHeader::new(ControlCommand::Reply, request_id, outcome.ok, &body);
+    if let Err(e) = ch.replies.send(reply, |h, buf| h.encode(&body, buf)) {
+        tracing::warn!("control reply: {e}");
     }
 }

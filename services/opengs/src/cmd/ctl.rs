@@ -6,6 +6,7 @@ use clap::{Args, Subcommand};
 use opengs_ipc_schema::service::{CONTROL_REPLIES, CONTROL_REQUESTS};
 use opengs_ipc_schema::{ControlCommand, ControlHeader};
 use opengs_pipeline::status::PipelineStatus;
+use opengs_pipeline::swap::SwapOutcome;
 use opengs_runtime::{
     waitset, ActiveRuns, CallbackProgression, Inlet, Outlet, RunContext, WaitSetRunResult,
 };
@@ -29,8 +30,11 @@ enum CtlWhat {
     },
     /// Stop the pipeline cleanly (as Ctrl-C would); outputs are written.
     Stop,
-    /// Replace a stage's implementation while the pipeline runs (make-before-break):
-    /// the new process starts, and the old one stops once the new one is ready.
+    /// Replace a stage's implementation while the pipeline runs (make-before-break): the new
+    /// kind starts with its own arguments (`[stages.kinds.KIND]` in the deploy file) and checks
+    /// its models; once it is ready the old process stops after its current keyframe (killed
+    /// after a 5 s grace period). Waits for the outcome: the new pid, the time to its first
+    /// output and the gap downstream. Exits 0 only when the swap succeeded.
     Swap {
         /// The stage to swap, e.g. `segmenter`.
         stage: String,
@@ -64,12 +68,34 @@ pub fn run(args: CtlArgs) -> anyhow::Result<()> {
         },
     };
     let (command, text, wait) = match &args.what {
-        CtlWhat::Status { .. } => (ControlCommand::Status, String::new(), 3),
-        CtlWhat::Stop => (ControlCommand::Stop, String::new(), 3),
-        // A model-based segmenter may take a while to load its weights.
-        CtlWhat::Swap { stage, to } => (ControlCommand::Swap, format!("{stage} {to}"), 120),
+        CtlWhat::Status { .. } => (ControlCommand::Status, String::new(), ANSWER_WAIT),
+        CtlWhat::Stop => (ControlCommand::Stop, String::new(), ANSWER_WAIT),
+        CtlWhat::Swap { stage, to } => {
+            eprintln!("swapping {stage} of run {} to {to} …", run.run_id);
+            (ControlCommand::Swap, format!("{stage} {to}"), SWAP_WAIT)
+        }
     };
-    let reply = request(&run.run_id, command, &text, Duration::from_secs(wait))?;
+    let (ok, reply) = request(&run.run_id, command, &text, wait)?;
+    if let CtlWhat::Swap { .. } = args.what {
+        // The outcome, or (refused before anything started) a plain reason.
+        return match serde_json::from_str::<SwapOutcome>(&reply) {
+            Ok(outcome) if outcome.ok => {
+                println!("{}", outcome.describe());
+                Ok(())
+            }
+            Ok(outcome) => anyhow::bail!("{}", outcome.describe()),
+            Err(_) => anyhow::bail!(
+                "the supervisor refused: {}",
+                serde_json::from_str::<String>(&reply).unwrap_or(reply)
+            ),
+        };
+    }
+    if !ok {
+        anyhow::bail!(
+            "the supervisor refused: {}",
+            serde_json::from_str::<String>(&reply).unwrap_or(reply)
+        );
+    }
     match args.what {
         CtlWhat::Status { json: true } => println!("{reply}"),
         CtlWhat::Status { json: false } => {
@@ -81,21 +107,25 @@ pub fn run(args: CtlArgs) -> anyhow::Result<()> {
             run.run_id,
             run.out_dir.display()
         ),
-        CtlWhat::Swap { .. } => println!(
-            "{}",
-            serde_json::from_str::<String>(&reply).unwrap_or(reply)
-        ),
+        CtlWhat::Swap { .. } => {}
     }
     Ok(())
 }
 
-/// Sends one control request and waits up to `wait` for the matching reply.
+/// How long status and stop may take: the supervisor answers between two 100 ms ticks.
+const ANSWER_WAIT: Duration = Duration::from_secs(3);
+/// A swap answers when it is over: the new process's start (the deploy file's
+/// `startup_timeout_s`), the old one's grace period and the wait for the first output
+/// (`opengs_pipeline::swap`); longer than any of that, and cut short if the run dies.
+const SWAP_WAIT: Duration = Duration::from_secs(15 * 60);
+
+/// Sends one control request and waits up to `wait` for the matching reply: (ok, text).
 fn request(
     run_id: &str,
     command: ControlCommand,
     text: &str,
     wait: Duration,
-) -> anyhow::Result<String> {
+) -> anyhow::Result<(bool, String)> {
     let ctx = RunContext::new(run_id)?;
     let node = ctx.node(&format!("ctl_{}", std::process::id()))?;
     let replies = Inlet::<ControlHeader>::new(&ctx, &node, &CONTROL_REPLIES)?;
@@ -108,10 +138,10 @@ fn request(
         .attach_deadline(replies.listener(), wait)
         .map_err(|e| anyhow::anyhow!("{e:?}"))?;
     let started = std::time::Instant::now();
-    while started.elapsed() < Duration::from_secs(3) {
+    while started.elapsed() < wait {
         match ws.wait_and_process_once_with_timeout(
             |_| CallbackProgression::Continue,
-            Duration::from_secs(3),
+            Duration::from_secs(1),
         ) {
             Ok(WaitSetRunResult::TerminationRequest | WaitSetRunResult::Interrupt) => {
                 anyhow::bail!("interrupted")
@@ -123,11 +153,15 @@ fn request(
         while let Some(sample) = replies.receive()? {
             let view = sample.user_header().decode(sample.payload())?;
             if view.request_id == id && view.command == ControlCommand::Reply {
-                if !view.ok {
-                    anyhow::bail!("the supervisor refused: {}", view.text);
-                }
-                return Ok(view.text.to_string());
+                return Ok((view.ok, view.text.to_string()));
             }
+        }
+        if !ActiveRuns::default()
+            .live()
+            .iter()
+            .any(|r| r.run_id == run_id)
+        {
+            anyhow::bail!("run {run_id} ended before it answered");
         }
     }
     anyhow::bail!("run {run_id} did not answer within {} s", wait.as_secs())
