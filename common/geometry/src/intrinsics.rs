@@ -23,6 +23,30 @@ impl Intrinsics {
         }
     }
 
+    /// `Err` saying what is wrong when the camera cannot project: focal lengths must be finite
+    /// and > 0, the principal point finite, the image at least 1×1.
+    pub fn validate(&self) -> Result<(), String> {
+        if !(self.fx.is_finite() && self.fx > 0.0 && self.fy.is_finite() && self.fy > 0.0) {
+            return Err(format!(
+                "focal lengths fx = {}, fy = {} must be finite and > 0",
+                self.fx, self.fy
+            ));
+        }
+        if !(self.cx.is_finite() && self.cy.is_finite()) {
+            return Err(format!(
+                "principal point cx = {}, cy = {} must be finite",
+                self.cx, self.cy
+            ));
+        }
+        if self.width == 0 || self.height == 0 {
+            return Err(format!(
+                "image size {}x{} must be at least 1x1",
+                self.width, self.height
+            ));
+        }
+        Ok(())
+    }
+
     /// Projects a camera-frame point to pixel coordinates; `None` behind the camera.
     pub fn project(&self, p: &Point3<f64>) -> Option<Vector2<f64>> {
         if p.z <= 0.0 {
@@ -70,6 +94,26 @@ impl Intrinsics {
 mod tests {
     use super::*;
     use approx::assert_relative_eq;
+
+    #[test]
+    fn validate_names_the_bad_value() {
+        assert!(Intrinsics::new(525.0, 525.0, 319.5, 239.5, 640, 480)
+            .validate()
+            .is_ok());
+        let e = Intrinsics::new(0.0, 525.0, 319.5, 239.5, 640, 480)
+            .validate()
+            .expect_err("fx 0");
+        assert!(e.contains("fx = 0"), "{e}");
+        assert!(Intrinsics::new(525.0, f64::INFINITY, 1.0, 1.0, 640, 480)
+            .validate()
+            .is_err());
+        assert!(Intrinsics::new(525.0, 525.0, f64::NAN, 1.0, 640, 480)
+            .validate()
+            .is_err());
+        assert!(Intrinsics::new(525.0, 525.0, 1.0, 1.0, 0, 480)
+            .validate()
+            .is_err());
+    }
 
     #[test]
     fn project_backproject_round_trip() {

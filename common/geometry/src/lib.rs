@@ -5,6 +5,7 @@
 //! stored camera-to-world as in TUM and Replica files, camera looking down +z.
 
 mod intrinsics;
+pub mod memory;
 mod ply;
 mod pose;
 

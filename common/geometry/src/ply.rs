@@ -32,6 +32,20 @@ pub enum PlyError {
     Invalid { vertex: usize, msg: String },
     #[error("PLY: {0}")]
     Unsupported(String),
+    #[error(
+        "PLY header declares {count} '{element}' entries, but the {bytes} bytes of data after \
+         the header hold at most {fits}"
+    )]
+    CountExceedsFile {
+        element: String,
+        count: usize,
+        bytes: usize,
+        fits: usize,
+    },
+    #[error("PLY: {0}")]
+    TooLarge(String),
+    #[error("PLY has data beyond its header's counts: {0}")]
+    ExtraData(String),
 }
 
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -244,7 +258,9 @@ impl VertexTable {
 }
 
 /// Reads the `vertex` element of a PLY file's bytes; a property of `required` that the header
-/// lacks is an error before any data is read.
+/// lacks is an error before any data is read. The header's counts are checked against the
+/// file's length and the memory budget before anything is allocated, and data beyond what
+/// they declare is an error (a count lower than the data).
 pub fn read_vertex_table(data: &[u8], required: &[&str]) -> Result<VertexTable, PlyError> {
     let header = parse_header(data)?;
     let vi = header
@@ -259,11 +275,29 @@ pub fn read_vertex_table(data: &[u8], required: &[&str]) -> Result<VertexTable, 
     {
         return Err(PlyError::MissingProperty(name.to_string()));
     }
-    let mut values_out = Vec::with_capacity(vertex.count.min(1 << 24) * vertex.props.len());
-    let mut values = vec![0.0f64; vertex.props.len()];
+    let body = data.get(header.body..).unwrap_or(&[]);
+    let n_props = vertex.props.len();
+    let rows = match header.format {
+        // An ASCII row takes at least a character and a separator per value: no more rows
+        // than that fit are allocated; reading finds where the file really ends.
+        Format::Ascii => vertex.count.min((body.len() + 1) / (2 * n_props).max(1)),
+        Format::BinaryLe | Format::BinaryBe => {
+            check_counts(&header, vi, body.len())?;
+            vertex.count
+        }
+    };
+    // Both bounds keep rows × props below the file's length.
+    let n_values = rows.saturating_mul(n_props);
+    crate::memory::check_memory(
+        &format!("the PLY's vertex table ({rows} vertices × {n_props} properties)"),
+        n_values as u128 * std::mem::size_of::<f64>() as u128,
+    )
+    .map_err(PlyError::TooLarge)?;
+    let mut values_out = Vec::with_capacity(n_values);
+    let mut values = vec![0.0f64; n_props];
     match header.format {
         Format::Ascii => {
-            let text = std::str::from_utf8(&data[header.body..]).map_err(|_| PlyError::Ascii {
+            let text = std::str::from_utf8(body).map_err(|_| PlyError::Ascii {
                 line: header.lines + 1,
                 msg: "body is not text".into(),
             })?;
@@ -271,16 +305,23 @@ pub fn read_vertex_table(data: &[u8], required: &[&str]) -> Result<VertexTable, 
                 .lines()
                 .enumerate()
                 .map(|(i, l)| (header.lines + 1 + i, l));
-            let skip: usize = header.elements[..vi].iter().map(|e| e.count).sum();
+            let skip = header.elements[..vi]
+                .iter()
+                .fold(0usize, |acc, e| acc.saturating_add(e.count));
             for _ in 0..skip {
-                lines.next();
+                if lines.next().is_none() {
+                    break;
+                }
             }
             for v in 0..vertex.count {
                 let Some((line, text)) = lines.next() else {
                     return Err(PlyError::Truncated {
                         vertex: v,
                         count: vertex.count,
-                        property: vertex.props[0].name.clone(),
+                        property: vertex
+                            .props
+                            .first()
+                            .map_or(String::new(), |p| p.name.clone()),
                     });
                 };
                 let mut toks = text.split_whitespace();
@@ -302,56 +343,60 @@ pub fn read_vertex_table(data: &[u8], required: &[&str]) -> Result<VertexTable, 
                 if toks.next().is_some() {
                     return Err(PlyError::Ascii {
                         line,
-                        msg: format!("vertex {v}: more than {} values", vertex.props.len()),
+                        msg: format!("vertex {v}: more than {n_props} values"),
                     });
                 }
                 values_out.extend_from_slice(&values);
             }
+            // Later elements are not bounded by check_counts: a huge count just skips all.
+            let after = header.elements[vi + 1..]
+                .iter()
+                .fold(0usize, |acc, e| acc.saturating_add(e.count));
+            for _ in 0..after {
+                if lines.next().is_none() {
+                    break;
+                }
+            }
+            if let Some((line, _)) = lines.find(|(_, l)| !l.trim().is_empty()) {
+                return Err(PlyError::ExtraData(format!(
+                    "line {line} is beyond the {} entries the header declares ({})",
+                    (skip + vertex.count).saturating_add(after),
+                    declared(&header.elements)
+                )));
+            }
         }
         Format::BinaryLe | Format::BinaryBe => {
             let little = header.format == Format::BinaryLe;
-            let record_size = |e: &Element| -> Result<usize, PlyError> {
-                e.props.iter().try_fold(0, |acc, p| match p.kind {
-                    Some(k) => Ok(acc + k.size()),
-                    None => Err(PlyError::Unsupported(format!(
-                        "list property '{}' in binary element '{}' before/in vertex",
-                        p.name, e.name
-                    ))),
-                })
-            };
-            let mut offset = header.body;
+            // check_counts made these sums and products fit in the body.
+            let mut offset = 0;
             for e in &header.elements[..vi] {
                 offset += record_size(e)? * e.count;
             }
             let stride = record_size(vertex)?;
-            let body = data.get(offset..).unwrap_or(&[]);
+            let body = &body[offset..];
             let needed = stride * vertex.count;
-            if body.len() < needed {
-                let v = body.len() / stride.max(1);
-                let mut within = body.len() - v * stride;
-                let mut property = String::new();
-                for p in &vertex.props {
-                    property = p.name.clone();
-                    let size = p.kind.map_or(0, Scalar::size);
-                    if within < size {
-                        break;
-                    }
-                    within -= size;
-                }
-                return Err(PlyError::Truncated {
-                    vertex: v,
-                    count: vertex.count,
-                    property,
-                });
-            }
             let kinds: Vec<Scalar> = vertex.props.iter().filter_map(|p| p.kind).collect();
-            for rec in body[..needed].chunks_exact(stride) {
+            for rec in body[..needed].chunks_exact(stride.max(1)) {
                 let mut o = 0;
                 for (k, kind) in kinds.iter().enumerate() {
                     values[k] = kind.read(&rec[o..], little);
                     o += kind.size();
                 }
                 values_out.extend_from_slice(&values);
+            }
+            // Later elements of fixed size (no lists) tell where the data must end.
+            let rest: Option<u128> = header.elements[vi + 1..]
+                .iter()
+                .map(|e| record_size(e).ok().map(|s| s as u128 * e.count as u128))
+                .sum();
+            if let Some(rest) = rest {
+                let extra = (body.len() as u128).saturating_sub(needed as u128 + rest);
+                if extra > 0 {
+                    return Err(PlyError::ExtraData(format!(
+                        "{extra} bytes after the data the header declares ({})",
+                        declared(&header.elements)
+                    )));
+                }
             }
         }
     }
@@ -360,4 +405,139 @@ pub fn read_vertex_table(data: &[u8], required: &[&str]) -> Result<VertexTable, 
         count: vertex.count,
         values: values_out,
     })
+}
+
+/// Bytes of one binary record of `e`; lists have no fixed size.
+fn record_size(e: &Element) -> Result<usize, PlyError> {
+    e.props.iter().try_fold(0, |acc, p| match p.kind {
+        Some(k) => Ok(acc + k.size()),
+        None => Err(PlyError::Unsupported(format!(
+            "list property '{}' in binary element '{}' before/in vertex",
+            p.name, e.name
+        ))),
+    })
+}
+
+/// `vertex 10, face 2`: the element counts of a header.
+fn declared(elements: &[Element]) -> String {
+    elements
+        .iter()
+        .map(|e| format!("{} {}", e.name, e.count))
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+/// Refuses binary counts that the `body_len` bytes after the header cannot hold, up to and
+/// including the vertex element (index `vi`). Done in u128, so no product overflows.
+fn check_counts(header: &Header, vi: usize, body_len: usize) -> Result<(), PlyError> {
+    let mut before: u128 = 0;
+    for (i, e) in header.elements[..=vi].iter().enumerate() {
+        let per = record_size(e)?;
+        let bytes = e.count as u128 * per as u128;
+        if before + bytes <= body_len as u128 {
+            before += bytes;
+            continue;
+        }
+        let left = (body_len as u128).saturating_sub(before) as usize;
+        if i == vi {
+            // Which vertex and property the file ends in, as a truncated download shows.
+            let v = left / per.max(1);
+            let mut within = left - v * per;
+            let mut property = String::new();
+            for p in &e.props {
+                property = p.name.clone();
+                let size = p.kind.map_or(0, Scalar::size);
+                if within < size {
+                    break;
+                }
+                within -= size;
+            }
+            return Err(PlyError::Truncated {
+                vertex: v,
+                count: e.count,
+                property,
+            });
+        }
+        return Err(PlyError::CountExceedsFile {
+            element: e.name.clone(),
+            count: e.count,
+            bytes: body_len,
+            fits: left / per.max(1),
+        });
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn binary(count: &str, rows: usize) -> Vec<u8> {
+        let mut data = format!(
+            "ply\nformat binary_little_endian 1.0\nelement vertex {count}\nproperty float x\n\
+             property float y\nproperty float z\nend_header\n"
+        )
+        .into_bytes();
+        for i in 0..rows * 3 {
+            data.extend_from_slice(&(i as f32).to_le_bytes());
+        }
+        data
+    }
+
+    #[test]
+    fn counts_beyond_the_file_are_refused_before_allocating() {
+        // 4e9 × 12 bytes would be 48 GB: refused from the file's length, nothing allocated.
+        match read_vertex_table(&binary("4000000000", 1), &["x"]) {
+            Err(PlyError::Truncated {
+                vertex: 1,
+                count: 4_000_000_000,
+                ..
+            }) => {}
+            other => panic!("{other:?}"),
+        }
+        // A count whose byte size overflows 64 bits.
+        assert!(read_vertex_table(&binary("18446744073709551615", 1), &["x"]).is_err());
+        let ascii = "ply\nformat ascii 1.0\nelement vertex 4000000000\nproperty float x\nend_header\n1\n2\n";
+        let e = read_vertex_table(ascii.as_bytes(), &["x"]).expect_err("ascii");
+        assert!(
+            matches!(
+                e,
+                PlyError::Truncated {
+                    vertex: 2,
+                    count: 4_000_000_000,
+                    ..
+                }
+            ),
+            "{e}"
+        );
+        // An element before the vertices with more entries than lines: skipped to the end.
+        let ascii = "ply
+format ascii 1.0
+element camera 99999999999999
+property float f
+element vertex 1
+property float x
+end_header
+1
+";
+        assert!(read_vertex_table(ascii.as_bytes(), &["x"]).is_err());
+        let before = "ply\nformat binary_little_endian 1.0\nelement camera 99999999999\nproperty float f\nelement vertex 1\nproperty float x\nend_header\n";
+        let e = read_vertex_table(before.as_bytes(), &["x"]).expect_err("camera");
+        assert!(e.to_string().contains("'camera'"), "{e}");
+    }
+
+    #[test]
+    fn data_beyond_the_declared_counts_is_refused() {
+        let ok = read_vertex_table(&binary("2", 2), &["x"]).expect("exact");
+        assert_eq!((ok.count, ok.values.len()), (2, 6));
+        let e = read_vertex_table(&binary("1", 2), &["x"]).expect_err("binary");
+        assert!(e.to_string().contains("12 bytes after"), "{e}");
+        let ascii =
+            "ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nend_header\n1\n2\n\n";
+        let e = read_vertex_table(ascii.as_bytes(), &["x"]).expect_err("ascii");
+        assert!(e.to_string().contains("line 7"), "{e}");
+        // Lines of a later element are not extra data; a trailing blank line is fine.
+        let faces = "ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n1\n3 0 0 0\n\n";
+        assert!(read_vertex_table(faces.as_bytes(), &["x"]).is_ok());
+    }
 }
