@@ -57,7 +57,10 @@ pub use map::{
     Gaussian, GaussianMap, SH_C0,
 };
 pub use output::{RenderOutput, RenderRequest, DEFAULT_TOP_K};
-pub use ply::{read_ply, read_ply_file, write_ply, write_ply_file, PlyError};
+pub use ply::{
+    read_ply, read_ply_counted, read_ply_file, read_ply_file_counted, write_ply, write_ply_file,
+    PlyError, PlyMap,
+};
 pub use png_out::{label_color, write_render_pngs};
 pub use project::{
     project, project_gaussian, project_into, radius_tile_rect, AlphaEllipse, Projected,

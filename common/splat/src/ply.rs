@@ -37,6 +37,17 @@ impl Columns {
         })
     }
 
+    /// Every value the map keeps is finite as f32 (the label is checked on its own).
+    fn finite(&self, v: &[f64]) -> bool {
+        self.mean
+            .iter()
+            .chain(&self.dc)
+            .chain(&self.scale)
+            .chain(&self.rot)
+            .chain(std::iter::once(&self.opacity))
+            .all(|&i| (v[i] as f32).is_finite())
+    }
+
     fn gaussian(&self, v: &[f64], vertex: usize) -> Result<Gaussian, PlyError> {
         let f = |i: usize| v[i] as f32;
         let label = match self.label {
@@ -73,25 +84,81 @@ impl Columns {
     }
 }
 
-/// Parses a PLY file's bytes into a map (SH beyond degree 0 ignored; no `label` → 0).
-pub fn read_ply(data: &[u8]) -> Result<GaussianMap, PlyError> {
+/// A map read from a PLY, with the Gaussians the reader left out of it.
+#[derive(Debug, Clone)]
+pub struct PlyMap {
+    pub map: GaussianMap,
+    /// Vertices left out because a value is NaN or infinite (as f32): no render, loss or
+    /// optimiser step can use them.
+    pub non_finite: usize,
+    /// The first of them (vertex index in the file).
+    pub first_non_finite: Option<usize>,
+}
+
+impl PlyMap {
+    /// What was left out, in words; `None` when nothing was.
+    pub fn dropped_message(&self) -> Option<String> {
+        let first = self.first_non_finite?;
+        Some(format!(
+            "{} of {} Gaussians have NaN or infinite values (the first is vertex {first}) and \
+             were left out",
+            self.non_finite,
+            self.non_finite + self.map.len()
+        ))
+    }
+
+    /// The map; with `strict`, an error when any Gaussian was left out.
+    pub fn into_map(self, strict: bool) -> Result<GaussianMap, PlyError> {
+        match self.dropped_message() {
+            Some(msg) if strict => Err(PlyError::Invalid {
+                vertex: self.first_non_finite.unwrap_or(0),
+                msg: format!("{msg}; refused (--strict)"),
+            }),
+            _ => Ok(self.map),
+        }
+    }
+}
+
+/// Parses a PLY file's bytes into a map (SH beyond degree 0 ignored; no `label` → 0), counting
+/// and leaving out Gaussians with NaN or infinite values.
+pub fn read_ply_counted(data: &[u8]) -> Result<PlyMap, PlyError> {
     let table = read_vertex_table(data, &Columns::REQUIRED)?;
     let cols = Columns::find(&table)?;
     let mut map = GaussianMap::with_capacity(table.count);
+    let (mut non_finite, mut first_non_finite) = (0, None);
     for (v, row) in table.rows().enumerate() {
+        if !cols.finite(row) {
+            non_finite += 1;
+            first_non_finite.get_or_insert(v);
+            continue;
+        }
         map.push(cols.gaussian(row, v)?);
     }
-    Ok(map)
+    Ok(PlyMap {
+        map,
+        non_finite,
+        first_non_finite,
+    })
 }
 
-/// Reads a PLY file from disk.
-pub fn read_ply_file(path: impl AsRef<Path>) -> Result<GaussianMap, PlyError> {
+/// [`read_ply_counted`]'s map: Gaussians with NaN or infinite values left out.
+pub fn read_ply(data: &[u8]) -> Result<GaussianMap, PlyError> {
+    Ok(read_ply_counted(data)?.map)
+}
+
+/// Reads a PLY file from disk ([`read_ply_counted`]).
+pub fn read_ply_file_counted(path: impl AsRef<Path>) -> Result<PlyMap, PlyError> {
     let path = path.as_ref();
     let data = std::fs::read(path).map_err(|source| PlyError::Io {
         path: path.display().to_string(),
         source,
     })?;
-    read_ply(&data)
+    read_ply_counted(&data)
+}
+
+/// Reads a PLY file from disk ([`read_ply`]).
+pub fn read_ply_file(path: impl AsRef<Path>) -> Result<GaussianMap, PlyError> {
+    Ok(read_ply_file_counted(path)?.map)
 }
 
 /// Writes the map as binary little-endian 3DGS PLY, SH degree 0, with a `label` property.
@@ -206,6 +273,25 @@ mod tests {
         assert_eq!(map.log_scales[0], [-4.0, -4.5, -5.0]);
         assert_eq!(map.rotations[1], [1.0, 0.0, 0.0, 0.0]);
         assert_eq!(map.labels, vec![0, 0]);
+    }
+
+    #[test]
+    fn non_finite_gaussians_are_counted_left_out_and_refused_when_strict() {
+        let mut map = indoor_scene(4, 1);
+        map.means[1][0] = f32::NAN;
+        map.log_scales[3][2] = f32::INFINITY;
+        let mut buf = Vec::new();
+        write_ply(&map, &mut buf).expect("write to memory");
+        let read = read_ply_counted(&buf).expect("readable");
+        assert_eq!((read.map.len(), read.non_finite), (2, 2));
+        let msg = read.dropped_message().expect("message");
+        assert!(
+            msg.starts_with("2 of 4 Gaussians") && msg.contains("vertex 1"),
+            "{msg}"
+        );
+        let e = read.clone().into_map(true).expect_err("strict");
+        assert!(e.to_string().contains("--strict"), "{e}");
+        assert_eq!(read.into_map(false).expect("lenient").len(), 2);
     }
 
     #[test]
