@@ -5,6 +5,7 @@ use std::io::BufWriter;
 use std::path::Path;
 
 use image::{DynamicImage, ImageBuffer, Luma, Rgb};
+use opengs_geometry::Intrinsics;
 
 use crate::DatasetError;
 
@@ -33,6 +34,42 @@ fn check_size(
             found_width: img.width(),
             found_height: img.height(),
         });
+    }
+    Ok(())
+}
+
+/// `Missing` naming the index file that lists `path` when the file is not there.
+pub(crate) fn check_exists(path: &Path, listed_in: &str) -> Result<(), DatasetError> {
+    if path.is_file() {
+        return Ok(());
+    }
+    Err(DatasetError::invalid(
+        path,
+        format!("not found (listed in {listed_in})"),
+    ))
+}
+
+/// Compares an image's size (read from its header only) with the camera's, so a wrong or
+/// missing calibration is named when the dataset is opened; `camera` says where `k` came from.
+pub(crate) fn check_image_size(
+    path: &Path,
+    k: &Intrinsics,
+    camera: &str,
+) -> Result<(), DatasetError> {
+    let (w, h) = image::ImageReader::open(path)
+        .map_err(|e| DatasetError::io(path, e))?
+        .with_guessed_format()
+        .map_err(|e| DatasetError::io(path, e))?
+        .into_dimensions()
+        .map_err(|e| DatasetError::Image {
+            path: path.to_path_buf(),
+            message: e.to_string(),
+        })?;
+    if (w, h) != (k.width, k.height) {
+        return Err(DatasetError::invalid(
+            path,
+            format!("image is {w}x{h}, but {camera} is {}x{}", k.width, k.height),
+        ));
     }
     Ok(())
 }

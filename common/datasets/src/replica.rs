@@ -8,7 +8,7 @@ use nalgebra::{Matrix3, Rotation3, Translation3, UnitQuaternion};
 use opengs_geometry::{Intrinsics, Pose};
 
 use crate::classes::read_class_table;
-use crate::image_io::{read_rgb, read_u16};
+use crate::image_io::{check_exists, check_image_size, read_rgb, read_u16};
 use crate::text::{data_lines, parse_numbers};
 use crate::{DatasetError, InstanceClass, RgbdFrame, RgbdSource};
 
@@ -133,6 +133,17 @@ impl ReplicaSource {
             }
             false => None,
         };
+        if let Some(c) = &params {
+            Intrinsics::new(c.fx, c.fy, c.cx, c.cy, c.w, c.h)
+                .validate()
+                .map_err(|e| DatasetError::invalid(&params_file, e))?;
+            if !(c.scale.is_finite() && c.scale > 0.0) {
+                return Err(DatasetError::invalid(
+                    &params_file,
+                    format!("depth scale {} must be finite and > 0", c.scale),
+                ));
+            }
+        }
         let intrinsics = options.intrinsics.unwrap_or_else(|| match &params {
             Some(c) => Intrinsics::new(c.fx, c.fy, c.cx, c.cy, c.w, c.h),
             None => replica_default_intrinsics(),
@@ -142,6 +153,21 @@ impl ReplicaSource {
         if !first_frame.exists() {
             return Err(DatasetError::Missing { path: first_frame });
         }
+        let has_labels = label_path(dir, 0).exists();
+        // A missing image found now fails before any stage starts, not mid-run.
+        for i in 0..poses.len() {
+            check_exists(&frame_path(dir, i), "traj.txt's poses")?;
+            check_exists(&depth_path(dir, i), "traj.txt's poses")?;
+            if has_labels {
+                check_exists(&label_path(dir, i), "traj.txt's poses")?;
+            }
+        }
+        let camera = match (options.intrinsics.is_some(), params.is_some()) {
+            (true, _) => "the camera given",
+            (false, true) => "cam_params.json",
+            (false, false) => "the Replica default camera (no cam_params.json)",
+        };
+        check_image_size(&first_frame, &intrinsics, camera)?;
         let classes_file = dir.join("classes.json");
         let classes = match classes_file.exists() {
             true => read_class_table(&classes_file)?,
@@ -153,7 +179,7 @@ impl ReplicaSource {
             depth_scale,
             options,
             poses,
-            has_labels: label_path(dir, 0).exists(),
+            has_labels,
             classes,
         })
     }

@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 use opengs_geometry::{Intrinsics, Pose};
 
 use crate::classes::read_class_table;
-use crate::image_io::{read_rgb, read_u16};
+use crate::image_io::{check_exists, check_image_size, read_rgb, read_u16};
 use crate::text::{data_lines, nearest_within, parse_numbers};
 use crate::trajectory::read_tum_trajectory;
 use crate::{DatasetError, InstanceClass, RgbdFrame, RgbdSource};
@@ -113,14 +113,10 @@ fn read_intrinsics_file(path: &Path) -> Result<Intrinsics, DatasetError> {
             "expected 'fx fy cx cy width height' with integer width and height",
         ));
     }
-    Ok(Intrinsics::new(
-        v[0],
-        v[1],
-        v[2],
-        v[3],
-        v[4] as u32,
-        v[5] as u32,
-    ))
+    let k = Intrinsics::new(v[0], v[1], v[2], v[3], v[4] as u32, v[5] as u32);
+    k.validate()
+        .map_err(|e| DatasetError::parse(path, *line_no, e))?;
+    Ok(k)
 }
 
 impl TumSource {
@@ -138,6 +134,14 @@ impl TumSource {
         };
         let rgb = read_file_list(dir, "rgb.txt")?;
         let depth = read_file_list(dir, "depth.txt")?;
+        for (name, list) in [("rgb.txt", &rgb), ("depth.txt", &depth)] {
+            if list.is_empty() {
+                return Err(DatasetError::invalid(
+                    &dir.join(name),
+                    "lists no images (expected 'timestamp filename' lines)",
+                ));
+            }
+        }
         let labels = match dir.join("labels.txt").exists() {
             true => read_file_list(dir, "labels.txt")?,
             false => Vec::new(),
@@ -176,6 +180,20 @@ impl TumSource {
                 format!("no colour frame has a depth frame within {max_dt} s (see depth.txt)"),
             ));
         }
+        // A missing image found now fails before any stage starts, not mid-run.
+        for e in &entries {
+            check_exists(&e.rgb, "rgb.txt")?;
+            check_exists(&e.depth, "depth.txt")?;
+            if let Some(l) = &e.labels {
+                check_exists(l, "labels.txt")?;
+            }
+        }
+        let camera = match (options.intrinsics.is_some(), intrinsics_file.exists()) {
+            (true, _) => "the camera given",
+            (false, true) => "intrinsics.txt",
+            (false, false) => "the TUM default camera (no intrinsics.txt)",
+        };
+        check_image_size(&entries[0].rgb, &intrinsics, camera)?;
         Ok(Self {
             dir: dir.to_path_buf(),
             intrinsics,

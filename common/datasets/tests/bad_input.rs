@@ -79,13 +79,71 @@ fn missing_image_file() {
     let dir = tempfile::tempdir().expect("tempdir");
     write_small(dir.path(), DatasetFormat::Tum);
     std::fs::remove_file(dir.path().join("rgb/000001.png")).expect("rm");
-    let mut src = tum(dir.path()).expect("open");
-    assert!(src.frame(0).is_ok());
-    let m = message(src.frame(1));
+    // Found when the dataset is opened, so a run fails before any stage starts.
+    let m = message(tum(dir.path()));
     assert!(
-        m.contains("rgb/000001.png") && m.contains("not found"),
+        m.contains("rgb/000001.png") && m.contains("not found (listed in rgb.txt)"),
         "{m}"
     );
+
+    let dir = tempfile::tempdir().expect("tempdir");
+    write_small(dir.path(), DatasetFormat::Replica);
+    std::fs::remove_file(dir.path().join("results/depth000001.png")).expect("rm");
+    let m = message(replica(dir.path()));
+    assert!(
+        m.contains("depth000001.png") && m.contains("not found"),
+        "{m}"
+    );
+}
+
+#[test]
+fn empty_lists_and_impossible_cameras_are_named() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    write_small(dir.path(), DatasetFormat::Tum);
+    std::fs::write(dir.path().join("rgb.txt"), "# timestamp filename\n").expect("write");
+    let m = message(tum(dir.path()));
+    assert!(
+        m.contains("rgb.txt") && m.contains("lists no images"),
+        "{m}"
+    );
+
+    for bad in ["0 525 319.5 239.5 640 480", "525 inf 319.5 239.5 640 480"] {
+        let dir = tempfile::tempdir().expect("tempdir");
+        write_small(dir.path(), DatasetFormat::Tum);
+        replace_line(&dir.path().join("intrinsics.txt"), 2, bad);
+        let m = message(tum(dir.path()));
+        assert!(m.contains("intrinsics.txt:2:"), "{bad}: {m}");
+    }
+    let dir = tempfile::tempdir().expect("tempdir");
+    write_small(dir.path(), DatasetFormat::Tum);
+    replace_line(
+        &dir.path().join("intrinsics.txt"),
+        2,
+        "525 525 319.5 239.5 320 240",
+    );
+    let m = message(tum(dir.path()));
+    assert!(
+        m.contains("640x480") && m.contains("intrinsics.txt is 320x240"),
+        "{m}"
+    );
+
+    // Replica without cam_params.json: the default camera is named, not a label image.
+    let dir = tempfile::tempdir().expect("tempdir");
+    write_small(dir.path(), DatasetFormat::Replica);
+    std::fs::remove_file(dir.path().join("cam_params.json")).expect("rm");
+    let m = message(replica(dir.path()));
+    assert!(
+        m.contains("frame000000.jpg") && m.contains("no cam_params.json"),
+        "{m}"
+    );
+    let dir = tempfile::tempdir().expect("tempdir");
+    write_small(dir.path(), DatasetFormat::Replica);
+    let params = dir.path().join("cam_params.json");
+    let text = std::fs::read_to_string(&params).expect("read");
+    let text = text.replacen("\"fx\": 525.0", "\"fx\": 0.0", 1);
+    std::fs::write(&params, text).expect("write");
+    let m = message(replica(dir.path()));
+    assert!(m.contains("cam_params.json") && m.contains("fx = 0"), "{m}");
 }
 
 #[test]
