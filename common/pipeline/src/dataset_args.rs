@@ -10,8 +10,8 @@ pub struct DatasetArgs {
     /// `synthetic` (the embedded room), `tum:DIR` or `replica:DIR`.
     #[arg(long, default_value = "synthetic")]
     pub dataset: String,
-    /// Use at most N frames.
-    #[arg(long)]
+    /// Use at most N frames (N ≥ 1).
+    #[arg(long, value_name = "N", value_parser = parse_at_least_one)]
     pub frames: Option<usize>,
     /// Synthetic only: drive the camera along this TUM trajectory file.
     #[arg(long)]
@@ -100,6 +100,8 @@ impl Default for DatasetArgs {
 impl DatasetArgs {
     pub fn spec(&self) -> anyhow::Result<DatasetSpec> {
         let kind: DatasetKind = self.dataset.parse()?;
+        // run.json's values bypass the flag parsers.
+        anyhow::ensure!(self.frames != Some(0), "--frames must be at least 1");
         let mut spec = DatasetSpec::new(kind).with_max_frames(self.frames);
         let synthetic = &mut spec.synthetic;
         synthetic.frames = self.frames;

@@ -3,6 +3,7 @@
 //! processes, and what a run does around it ([`run`]): its outputs, its scores, its progress
 //! display. Stage binaries in `services/` call into this crate.
 
+pub mod cli_values;
 pub mod consensus_stage;
 pub mod dataset_args;
 pub mod deploy;
