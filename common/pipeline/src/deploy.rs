@@ -245,12 +245,14 @@ impl DeployFile {
                     s.name
                 )));
             }
+            // Pinning to no existing cpu is impossible: refused, as other impossible values.
             if !s.cpus.is_empty() && s.cpus.iter().all(|&c| c >= ncpu) {
-                tracing::warn!(
-                    "stage '{}': none of cpus {:?} exist on this {ncpu}-cpu machine; not pinning",
+                return Err(invalid(format!(
+                    "stage '{}': none of cpus {:?} exist on this {ncpu}-cpu machine (cpus 0-{})",
                     s.name,
-                    s.cpus
-                );
+                    s.cpus,
+                    ncpu - 1
+                )));
             }
         }
         if self
