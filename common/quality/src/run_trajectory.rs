@@ -22,7 +22,23 @@ pub struct RunMetrics {
     pub ate_max_cm: Option<f64>,
 }
 
-/// Computes the metrics of `run_dir` and writes `metrics.json`.
+/// The `ate_*` keys of the metrics.json at `path` that hold a number.
+fn kept_ate(path: &Path) -> Vec<String> {
+    let Ok(text) = std::fs::read_to_string(path) else {
+        return Vec::new();
+    };
+    match serde_json::from_str::<serde_json::Value>(&text) {
+        Ok(serde_json::Value::Object(m)) => m
+            .into_iter()
+            .filter(|(k, v)| k.starts_with("ate_") && v.is_number())
+            .map(|(k, _)| k)
+            .collect(),
+        _ => Vec::new(),
+    }
+}
+
+/// Computes the metrics of `run_dir` and writes `metrics.json` (without ground truth, an ATE
+/// already in it is left as it is).
 pub fn evaluate_run_trajectory(run_dir: &Path) -> anyhow::Result<RunMetrics> {
     let run = RunDir::new(run_dir);
     let traj_path = run.trajectory();
@@ -44,7 +60,8 @@ pub fn evaluate_run_trajectory(run_dir: &Path) -> anyhow::Result<RunMetrics> {
         ate_mean_cm: None,
         ate_max_cm: None,
     };
-    if gt_path.exists() {
+    let has_gt = gt_path.exists();
+    if has_gt {
         let gt = read_tum_trajectory(&gt_path)?;
         let ate = absolute_trajectory_error(&estimated, &gt, MAX_DT)?;
         metrics.ate_rmse_cm = Some(ate.rmse * 100.0);
@@ -52,9 +69,14 @@ pub fn evaluate_run_trajectory(run_dir: &Path) -> anyhow::Result<RunMetrics> {
         metrics.ate_max_cm = Some(ate.max * 100.0);
     }
     // Merge: other producers (render quality, refine) keep their keys.
-    let serde_json::Value::Object(entries) = serde_json::to_value(&metrics)? else {
+    let serde_json::Value::Object(mut entries) = serde_json::to_value(&metrics)? else {
         anyhow::bail!("metrics did not serialise to an object");
     };
+    if !has_gt {
+        // No ground truth now (e.g. removed after the run): an ATE already there is kept.
+        let kept = kept_ate(&run.metrics());
+        entries.retain(|k, _| !kept.contains(k));
+    }
     crate::merge_metrics_json(&run.metrics(), entries)?;
     Ok(metrics)
 }

@@ -160,5 +160,16 @@ fn run_directory_evaluation_records_metrics_and_names_missing_files() {
     let text = std::fs::read_to_string(dir.join("quality.json")).expect("quality.json");
     let q: serde_json::Value = serde_json::from_str(&text).expect("json");
     assert_eq!(q["per_frame"].as_array().map(Vec::len), Some(4));
+
+    // No groundtruth.txt: the trajectory evaluation keeps the ATE already there.
+    let m = crate::evaluate_run_trajectory(&dir).expect("evaluates");
+    assert_eq!((m.frames, m.ate_rmse_cm), (4, None));
+    let text = std::fs::read_to_string(dir.join("metrics.json")).expect("metrics");
+    let v: serde_json::Value = serde_json::from_str(&text).expect("json");
+    assert_eq!(
+        (v["ate_rmse_cm"].clone(), v["frames"].clone()),
+        (0.3.into(), 4.into())
+    );
+    assert!(v["ate_mean_cm"].is_null());
     let _ = std::fs::remove_dir_all(&dir);
 }
