@@ -11,7 +11,7 @@ pub struct DatasetArgs {
     #[arg(long, default_value = "synthetic")]
     pub dataset: String,
     /// Use at most N frames (N ≥ 1).
-    #[arg(long, value_name = "N", value_parser = parse_at_least_one)]
+    #[arg(long, value_name = "N", value_parser = parse_at_least_one, allow_hyphen_values = true)]
     pub frames: Option<usize>,
     /// Synthetic only: drive the camera along this TUM trajectory file.
     #[arg(long)]

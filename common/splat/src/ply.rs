@@ -100,8 +100,7 @@ impl PlyMap {
     pub fn dropped_message(&self) -> Option<String> {
         let first = self.first_non_finite?;
         Some(format!(
-            "{} of {} Gaussians have NaN or infinite values (the first is vertex {first}) and \
-             were left out",
+            "{} of {} Gaussians have NaN or infinite values (the first is vertex {first})",
             self.non_finite,
             self.non_finite + self.map.len()
         ))

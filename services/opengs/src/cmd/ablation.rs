@@ -17,7 +17,7 @@ pub struct AblationArgs {
     #[arg(long, default_value = "runs/ablation")]
     pub out_root: PathBuf,
     /// Runs per setting; the table gives their mean and standard deviation.
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = 1, value_parser = opengs_pipeline::cli_values::at_least_one)]
     pub repeats: usize,
     #[command(flatten)]
     pub run: RunArgs,

@@ -6,19 +6,20 @@ use anyhow::Context;
 use opengs_gicp::bench::{bench_pair, sequence_fps, time_registration};
 use opengs_gicp::cloud_io::write_xyz;
 use opengs_gicp::{Cloud, RegistrationConfig, Regularization, Solver, Target, DEFAULT_NEIGHBOURS};
+use opengs_pipeline::cli_values::at_least_one;
 use std::path::PathBuf;
 use std::time::Instant;
 
 #[derive(Debug, clap::Args)]
 pub struct BenchGicpArgs {
     /// Registrations per setting (the median is printed).
-    #[arg(long, default_value_t = 21)]
+    #[arg(long, default_value_t = 21, value_parser = at_least_one)]
     pub repeats: usize,
     /// Frames in the throughput sequence.
-    #[arg(long, default_value_t = 30)]
+    #[arg(long, default_value_t = 30, value_parser = at_least_one)]
     pub frames: usize,
     /// Thread counts to time.
-    #[arg(long, value_delimiter = ',', default_value = "1,2")]
+    #[arg(long, value_delimiter = ',', default_value = "1,2", value_parser = at_least_one)]
     pub threads: Vec<usize>,
     /// Also time with small_gicp's plane covariances (the setting that
     /// scripts/compare_small_gicp.py reproduces).

@@ -17,7 +17,7 @@ use serde::{Deserialize, Serialize};
 #[derive(clap::Args)]
 pub struct BenchIpcArgs {
     /// Messages per scenario.
-    #[arg(long, default_value_t = 600)]
+    #[arg(long, default_value_t = 600, value_parser = clap::value_parser!(u64).range(1..))]
     count: u64,
 }
 

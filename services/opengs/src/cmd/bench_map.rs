@@ -6,14 +6,15 @@ use std::path::{Path, PathBuf};
 use anyhow::Context;
 
 use opengs_eval::RunDir;
+use opengs_pipeline::cli_values::at_least_one;
 
 #[derive(clap::Args)]
 pub struct BenchMapArgs {
     /// Timed steps per case.
-    #[arg(long, default_value_t = 15)]
+    #[arg(long, default_value_t = 15, value_parser = at_least_one)]
     steps: usize,
     /// Gaussians in the scene.
-    #[arg(long, default_value_t = 100_000)]
+    #[arg(long, default_value_t = 100_000, value_parser = at_least_one)]
     gaussians: usize,
     /// Also report the mapper of this run directory (repeatable): online iterations per
     /// second and the final optimisation's steps per second.

@@ -1,13 +1,14 @@
 //! `opengs bench render`: the renderer benchmark (median ms per frame) on synthetic scenes.
 
 use anyhow::Context;
+use opengs_pipeline::cli_values::at_least_one;
 use opengs_splat::args;
 use opengs_splat::bench::{run_render_bench, BenchConfig};
 
 #[derive(Debug, clap::Args)]
 pub struct BenchRenderArgs {
     /// Scene sizes (number of Gaussians), comma-separated.
-    #[arg(long, value_delimiter = ',', default_values_t = [100_000usize, 500_000])]
+    #[arg(long, value_delimiter = ',', default_values_t = [100_000usize, 500_000], value_parser = at_least_one)]
     pub gaussians: Vec<usize>,
     /// Image sizes, comma-separated WxH (focal 525 at 640 wide, scaled; centred principal point).
     #[arg(long, value_parser = args::parse_size, value_delimiter = ',', default_values = ["640x480", "1200x680"])]
@@ -15,17 +16,17 @@ pub struct BenchRenderArgs {
     /// Timed frames per case (median reported). The four requests (colour+depth, +labels+top-K,
     /// +labels only, +top-K only) render each frame in turn, so the overhead column is the
     /// median of per-frame ratios and a busy machine slows all columns alike.
-    #[arg(long, default_value_t = 9)]
+    #[arg(long, default_value_t = 9, value_parser = at_least_one)]
     pub frames: usize,
     /// Renders of each frame per request, the fastest kept: steadier figures on a shared
     /// machine (slow spells only ever add time). Try 5 when comparing two builds.
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = 1, value_parser = at_least_one)]
     pub repeat: usize,
     /// Worker threads (default: all cores). 1 shows the per-core cost without scheduling.
-    #[arg(long)]
+    #[arg(long, value_parser = at_least_one)]
     pub threads: Option<usize>,
     /// K of the per-pixel top-K.
-    #[arg(long, default_value_t = 50)]
+    #[arg(long, default_value_t = 50, value_parser = at_least_one)]
     pub top_k: usize,
     /// Also print project / bin+sort / rasterize times of one (b) frame per case.
     #[arg(long)]
@@ -33,14 +34,11 @@ pub struct BenchRenderArgs {
 }
 
 pub fn run(args: BenchRenderArgs) -> anyhow::Result<()> {
-    anyhow::ensure!(args.frames > 0, "--frames must be at least 1");
-    anyhow::ensure!(args.repeat > 0, "--repeat must be at least 1");
-    anyhow::ensure!(args.threads != Some(0), "--threads must be at least 1");
-    anyhow::ensure!(args.top_k > 0, "--top-k must be at least 1");
-    anyhow::ensure!(
-        args.gaussians.iter().all(|&n| n > 0),
-        "--gaussians must be positive"
-    );
+    for &(w, h) in &args.sizes {
+        args::check_render_size(w, h, Some(args.top_k))
+            .map_err(anyhow::Error::msg)
+            .context("--sizes")?;
+    }
     let cfg = BenchConfig {
         gaussian_counts: args.gaussians,
         intrinsics: args

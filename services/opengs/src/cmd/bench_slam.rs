@@ -17,6 +17,7 @@ use opengs_datasets::{
     write_dataset, DatasetFormat, DepthNoise, RgbdSource, SyntheticOptions, SyntheticSource,
 };
 use opengs_eval::RunDir;
+use opengs_pipeline::cli_values;
 use serde::{Deserialize, Serialize};
 
 /// The real TUM trajectories the paths follow (data/tum_trajectories, CC BY 4.0), compiled
@@ -68,7 +69,7 @@ pub struct BenchSlamArgs {
     #[arg(long, value_delimiter = ',')]
     noise: Option<Vec<NoiseSetting>>,
     /// Frames per case [default: 600 (20 s at 30 Hz); --quick: 150].
-    #[arg(long)]
+    #[arg(long, value_parser = cli_values::at_least_one)]
     frames: Option<usize>,
     /// Skip the fr2_desk teleport rows.
     #[arg(long)]
@@ -81,7 +82,7 @@ pub struct BenchSlamArgs {
     #[arg(long, default_value = "prior")]
     segmenter: String,
     /// Sensor rate cap of each run (frames/s) [default: the recorded 30 Hz].
-    #[arg(long)]
+    #[arg(long, value_parser = cli_values::rate)]
     max_rate: Option<f64>,
     /// Directory for the generated datasets (kept and reused), the runs and bench_slam.json.
     #[arg(long, default_value = "runs/bench_slam")]

@@ -7,6 +7,7 @@ pub mod bench_render;
 pub mod bench_slam;
 pub mod ctl;
 pub mod eval;
+pub mod map_input;
 pub mod models;
 pub mod objects;
 pub mod profile;

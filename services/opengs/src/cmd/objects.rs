@@ -11,7 +11,10 @@ use opengs_objects::{
     refuse_higher_bands, require_labels, split, Catalog, ObjectSummary, PixelBox, RigidMotion,
     Selection,
 };
-use opengs_splat::{args, read_ply, render, write_ply_file, Camera, GaussianMap, RenderRequest};
+use opengs_pipeline::cli_values;
+use opengs_splat::{args, render, write_ply_file, Camera, GaussianMap, RenderRequest};
+
+use crate::cmd::map_input::{load_map, parse_map};
 
 #[derive(Debug, clap::Args)]
 pub struct ObjectsArgs {
@@ -45,6 +48,9 @@ struct SourceArgs {
     /// Class names (a run's labels.json). Default: the run's, or the labels.json beside the .ply.
     #[arg(long)]
     labels: Option<PathBuf>,
+    /// Refuse a map with NaN or infinite values instead of leaving those Gaussians out.
+    #[arg(long)]
+    strict: bool,
 }
 
 /// Which objects: exactly one of these.
@@ -78,7 +84,7 @@ struct ViewArgs {
     #[arg(long, value_parser = args::parse_size)]
     size: Option<(u32, u32)>,
     /// Near plane in metres: Gaussians closer than this are culled.
-    #[arg(long, default_value_t = opengs_splat::DEFAULT_NEAR)]
+    #[arg(long, default_value_t = opengs_splat::DEFAULT_NEAR, value_parser = cli_values::non_negative_f32)]
     near: f32,
 }
 
@@ -152,7 +158,7 @@ struct RotateArgs {
     #[arg(long, value_name = "X,Y,Z", allow_hyphen_values = true, value_parser = parse_vec3)]
     axis: [f64; 3],
     /// Angle in degrees (right-hand rule about --axis).
-    #[arg(long, allow_hyphen_values = true)]
+    #[arg(long, allow_hyphen_values = true, value_parser = cli_values::finite)]
     degrees: f64,
     /// Centre of the turn X,Y,Z; default: the selection's opacity-weighted centroid.
     #[arg(long, value_name = "X,Y,Z", allow_hyphen_values = true, value_parser = parse_vec3)]
@@ -173,8 +179,8 @@ struct RenderEditArgs {
     /// The PNG to write: colour and labels, before left, after right.
     #[arg(long)]
     out: PathBuf,
-    /// Scale the PNG by this factor (e.g. 0.5 for a small picture).
-    #[arg(long, default_value_t = 1.0)]
+    /// Scale the PNG by this factor in (0, 4] (e.g. 0.5 for a small picture).
+    #[arg(long, default_value_t = 1.0, value_parser = parse_scale)]
     scale: f32,
 }
 
@@ -217,7 +223,7 @@ impl SourceArgs {
         };
         let data =
             std::fs::read(&map_path).with_context(|| format!("reading {}", map_path.display()))?;
-        let map = read_ply(&data).with_context(|| format!("reading {}", map_path.display()))?;
+        let map = parse_map(&data, &map_path, self.strict)?;
         let sh_degree = ply_sh_degree(&data)
             .map_err(anyhow::Error::msg)
             .with_context(|| map_path.display().to_string())?;
@@ -249,11 +255,10 @@ impl ViewArgs {
             .context("--intrinsics")?;
         let pose =
             opengs_geometry::parse_tum_pose(pose).with_context(|| format!("--pose '{pose}'"))?;
-        anyhow::ensure!(
-            self.near.is_finite() && self.near >= 0.0,
-            "--near must be a finite distance ≥ 0, got {}",
-            self.near
-        );
+        // Before and after, side by side: twice a labelled render.
+        args::check_render_size(w.saturating_mul(2), h, None)
+            .map_err(anyhow::Error::msg)
+            .context("--size")?;
         Ok(Camera::from_pose(intrinsics, &pose, self.near))
     }
 }
@@ -590,13 +595,7 @@ fn write_map_replacing(map: &GaussianMap, path: &Path) -> anyhow::Result<()> {
 
 fn render_edit(args: RenderEditArgs) -> anyhow::Result<()> {
     let source = args.source.load()?;
-    anyhow::ensure!(
-        args.scale.is_finite() && args.scale > 0.0 && args.scale <= 4.0,
-        "--scale must be in (0, 4], got {}",
-        args.scale
-    );
-    let after = opengs_splat::read_ply_file(&args.after)
-        .with_context(|| format!("reading --after {}", args.after.display()))?;
+    let after = load_map(&args.after, args.source.strict).context("--after")?;
     refuse_overwriting(&args.out, &source.map_path, "the map before the edit")?;
     refuse_overwriting(&args.out, &args.after, "the map after the edit (--after)")?;
     let camera = args.view.camera("render-edit")?;
@@ -685,6 +684,14 @@ fn parse_pixel(text: &str) -> Result<(u32, u32), String> {
 fn parse_box(text: &str) -> Result<PixelBox, String> {
     let [x0, y0, x1, y1] = numbers::<u32, 4>(text, "box X0,Y0,X1,Y1")?;
     Ok(PixelBox { x0, y0, x1, y1 })
+}
+
+/// `--scale`: a factor in (0, 4].
+fn parse_scale(text: &str) -> Result<f32, String> {
+    match cli_values::positive_f32(text) {
+        Ok(s) if s <= 4.0 => Ok(s),
+        _ => Err(format!("'{text}' is not a scale in (0, 4]")),
+    }
 }
 
 fn parse_vec3(text: &str) -> Result<[f64; 3], String> {

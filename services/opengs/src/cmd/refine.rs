@@ -12,28 +12,31 @@ use opengs_datasets::open_dataset;
 use opengs_eval::read_tum_trajectory;
 use opengs_eval::RunDir;
 use opengs_mapping::{refine, RefineConfig};
+use opengs_pipeline::cli_values::{at_least_one, positive_f32};
 use opengs_pipeline::{DatasetArgs, RunRecord};
 use opengs_quality::{
     evaluate_dataset_quality, load_posed_frames, merge_metrics_json, write_quality_metrics,
     write_report_json, QualityReport,
 };
-use opengs_splat::{read_ply_file, write_ply_file};
+use opengs_splat::write_ply_file;
+
+use crate::cmd::map_input::load_map;
 
 #[derive(Debug, clap::Args)]
 pub struct RefineArgs {
     /// A run directory written by `opengs run` (map.ply, trajectory.txt, run.json).
     pub run_dir: PathBuf,
-    /// Optimisation steps.
-    #[arg(long, default_value_t = 1000)]
+    /// Optimisation steps (≥ 1).
+    #[arg(long, default_value_t = 1000, value_parser = at_least_one)]
     pub iters: usize,
-    /// Train on every Nth trajectory frame [default: 5].
-    #[arg(long)]
+    /// Train on every Nth trajectory frame, N ≥ 1 [default: 5].
+    #[arg(long, value_name = "N", value_parser = at_least_one)]
     pub every: Option<usize>,
-    /// Evaluate PSNR / SSIM on every Nth trajectory frame.
-    #[arg(long, default_value_t = 5)]
+    /// Evaluate PSNR / SSIM on every Nth trajectory frame (N ≥ 1).
+    #[arg(long, value_name = "N", default_value_t = 5, value_parser = at_least_one)]
     pub eval_every: usize,
-    /// Keep at most this many keyframes in memory (`--every` is raised to fit).
-    #[arg(long, default_value_t = 300)]
+    /// Keep at most this many keyframes in memory (`--every` is raised to fit; ≥ 1).
+    #[arg(long, default_value_t = 300, value_parser = at_least_one)]
     pub max_keyframes: usize,
     /// Optimise at half resolution (4× cheaper per step, as the online mapper does, but
     /// detail finer than two pixels stays blurred).
@@ -44,7 +47,7 @@ pub struct RefineArgs {
     pub seed: u64,
     /// Smallest scene extent (m) for the position learning rate and size pruning; the
     /// extent is otherwise 1.1 × the radius of the keyframe camera centres.
-    #[arg(long, default_value_t = 1.0)]
+    #[arg(long, default_value_t = 1.0, value_parser = positive_f32)]
     pub min_scene_extent: f32,
     /// Map to refine [default: RUN_DIR/map.ply].
     #[arg(long)]
@@ -52,6 +55,9 @@ pub struct RefineArgs {
     /// Dataset (`synthetic`, `tum:DIR`, `replica:DIR`) when run.json does not name it.
     #[arg(long)]
     pub dataset: Option<String>,
+    /// Refuse a map with NaN or infinite values instead of leaving those Gaussians out.
+    #[arg(long)]
+    pub strict: bool,
 }
 
 pub fn run(args: RefineArgs) -> anyhow::Result<()> {
@@ -61,17 +67,10 @@ pub fn run(args: RefineArgs) -> anyhow::Result<()> {
         "{}: not a run directory (expected the output directory of `opengs run`)",
         dir.display()
     );
-    anyhow::ensure!(args.iters > 0, "--iters must be at least 1");
-    anyhow::ensure!(
-        args.min_scene_extent.is_finite() && args.min_scene_extent > 0.0,
-        "--min-scene-extent must be a positive distance, got {}",
-        args.min_scene_extent
-    );
     let dataset = dataset_args(dir, args.dataset.as_deref())?;
     let run = RunDir::new(dir);
     let map_path = args.map.clone().unwrap_or_else(|| run.map());
-    let mut map =
-        read_ply_file(&map_path).with_context(|| format!("reading {}", map_path.display()))?;
+    let mut map = load_map(&map_path, args.strict)?;
     anyhow::ensure!(!map.is_empty(), "{}: the map is empty", map_path.display());
     let trajectory = read_tum_trajectory(&run.trajectory())?;
     anyhow::ensure!(

@@ -6,6 +6,7 @@ use opengs_gicp::{
     register, voxel_downsample, Cloud, Isometry3, RegistrationConfig, Regularization, Solver,
     Target,
 };
+use opengs_pipeline::cli_values::{at_least_one, at_least_three, positive};
 use std::path::PathBuf;
 use std::time::Instant;
 
@@ -36,14 +37,14 @@ pub struct RegisterArgs {
     /// Initial source → target transform: 16 numbers, row-major.
     #[arg(long)]
     pub init: Option<String>,
-    /// Voxel-downsample both clouds with this voxel size (metres) first.
-    #[arg(long)]
+    /// Voxel-downsample both clouds with this voxel size (metres, > 0) first.
+    #[arg(long, value_parser = positive)]
     pub voxel: Option<f64>,
-    /// Worker threads (default: all cores).
-    #[arg(long)]
+    /// Worker threads (≥ 1; default: all cores).
+    #[arg(long, value_parser = at_least_one)]
     pub threads: Option<usize>,
-    /// Maximum correspondence distance (metres).
-    #[arg(long, default_value_t = 0.03)]
+    /// Maximum correspondence distance (metres, > 0).
+    #[arg(long, default_value_t = 0.03, value_parser = positive)]
     pub max_corr: f64,
     /// Gauss-Newton or Levenberg-Marquardt.
     #[arg(long, value_enum, default_value = "gn")]
@@ -51,8 +52,8 @@ pub struct RegisterArgs {
     /// How neighbourhood covariances are regularised.
     #[arg(long, value_enum, default_value = "ellipse")]
     pub covariance: CovarianceArg,
-    /// Neighbours per covariance.
-    #[arg(long, default_value_t = opengs_gicp::DEFAULT_NEIGHBOURS)]
+    /// Neighbours per covariance (≥ 3).
+    #[arg(long, default_value_t = opengs_gicp::DEFAULT_NEIGHBOURS, value_parser = at_least_three)]
     pub neighbours: usize,
 }
 
@@ -84,9 +85,6 @@ pub fn run(args: RegisterArgs) -> anyhow::Result<()> {
     let mut source_points = read_cloud(&args.source)?;
     let mut target_points = read_cloud(&args.target)?;
     if let Some(voxel) = args.voxel {
-        if voxel.is_nan() || voxel <= 0.0 {
-            bail!("--voxel must be a positive size in metres, got {voxel}");
-        }
         source_points = voxel_downsample(&source_points, voxel);
         target_points = voxel_downsample(&target_points, voxel);
     }

@@ -3,7 +3,10 @@
 use std::path::PathBuf;
 
 use anyhow::Context;
-use opengs_splat::{args, read_ply_file, render, write_render_pngs, Camera, RenderRequest};
+use opengs_pipeline::cli_values;
+use opengs_splat::{args, render, write_render_pngs, Camera, RenderRequest};
+
+use crate::cmd::map_input::load_map;
 
 #[derive(Debug, clap::Args)]
 pub struct RenderArgs {
@@ -23,11 +26,14 @@ pub struct RenderArgs {
     #[arg(long)]
     pub out: PathBuf,
     /// Near plane in metres: Gaussians closer than this are culled.
-    #[arg(long, default_value_t = opengs_splat::DEFAULT_NEAR)]
+    #[arg(long, default_value_t = opengs_splat::DEFAULT_NEAR, value_parser = cli_values::non_negative_f32)]
     pub near: f32,
     /// Also compute the per-pixel top-K Gaussians (K = 50) and write topk_count.png.
     #[arg(long)]
     pub top_k: bool,
+    /// Refuse a map with NaN or infinite values instead of leaving those Gaussians out.
+    #[arg(long)]
+    pub strict: bool,
 }
 
 pub fn run(args: RenderArgs) -> anyhow::Result<()> {
@@ -35,18 +41,15 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
     let intrinsics = args::parse_intrinsics(&args.intrinsics, w, h).map_err(anyhow::Error::msg)?;
     let pose = opengs_geometry::parse_tum_pose(&args.pose)
         .with_context(|| format!("--pose '{}'", args.pose))?;
-    anyhow::ensure!(
-        args.near.is_finite() && args.near >= 0.0,
-        "--near must be a finite distance ≥ 0, got {}",
-        args.near
-    );
-    let map =
-        read_ply_file(&args.map).with_context(|| format!("reading {}", args.map.display()))?;
-    let camera = Camera::from_pose(intrinsics, &pose, args.near);
     let request = RenderRequest {
         top_k: args.top_k.then_some(opengs_splat::DEFAULT_TOP_K),
         ..RenderRequest::semantic(opengs_splat::DEFAULT_TOP_K)
     };
+    args::check_render_size(w, h, request.top_k)
+        .map_err(anyhow::Error::msg)
+        .context("--size")?;
+    let map = load_map(&args.map, args.strict)?;
+    let camera = Camera::from_pose(intrinsics, &pose, args.near);
     let t0 = std::time::Instant::now();
     let rendered = render(&map, &camera, &request);
     let ms = t0.elapsed().as_secs_f64() * 1e3;

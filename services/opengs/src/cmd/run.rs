@@ -2,6 +2,7 @@
 
 use std::path::{Path, PathBuf};
 
+use opengs_pipeline::cli_values;
 use opengs_pipeline::consensus_stage::{Ablation, ConsensusRunFlags};
 use opengs_pipeline::deploy::stage_names;
 use opengs_pipeline::mapper_stage::MapperRunFlags;
@@ -28,7 +29,7 @@ pub struct RunArgs {
     /// Sensor rate cap in frames/s (0 = as fast as possible). Default: the dataset's rate;
     /// for the synthetic room 10 Hz, because ray-casting it at 30 Hz takes most of a 2-core
     /// machine and would starve the mapper (a slower replay, like `rosbag play -r`).
-    #[arg(long)]
+    #[arg(long, value_name = "HZ", value_parser = cli_values::rate, allow_hyphen_values = true)]
     pub max_rate: Option<f64>,
     /// Segmenter to start with: geometry (depth-first, no weights), classic (graph-based, no
     /// weights), prior (ground truth), sam, mobilesamv2.

@@ -27,8 +27,8 @@ pub struct SynthArgs {
     /// Dataset layout to write.
     #[arg(long, value_enum, default_value_t = SynthFormat::Tum)]
     pub format: SynthFormat,
-    /// Number of frames (default: one 20 s loop, or the whole trajectory).
-    #[arg(long)]
+    /// Number of frames, N ≥ 1 (default: one 20 s loop, or the whole trajectory).
+    #[arg(long, value_name = "N", value_parser = parse_at_least_one, allow_hyphen_values = true)]
     pub frames: Option<usize>,
     /// Drive the camera along this TUM trajectory (re-centred into the fixed
     /// room; a generated room is fitted around it).
