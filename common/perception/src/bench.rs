@@ -1,7 +1,8 @@
 //! Timing of the segmenters on synthetic 640×480 frames: the weight-free
-//! ones, and (cargo feature `onnx`, ONNX Runtime available) the tiny-model
-//! ensemble — MobileSAMv2-style box prompts plus tagger and detector on the
-//! test fixtures, i.e. the pipeline's own overhead without real weights.
+//! ones, and (cargo feature `onnx`, ONNX Runtime available) both SAM-family
+//! paths on the test fixtures — grid point prompts and MobileSAMv2-style box
+//! prompts, each without and with the tagger/detector ensemble — split into
+//! model time and our own (the pipeline's overhead without real weights).
 
 use std::time::Instant;
 
@@ -12,7 +13,7 @@ use crate::{PerceptionError, Segmenter, SegmenterInput, SegmenterKind};
 /// Median and minimum wall time of one segmenter over the bench frames.
 #[derive(Debug, Clone, PartialEq)]
 pub struct SegmentTiming {
-    /// Segmenter as printed (`classic`, `prior`, `tiny-ensemble`).
+    /// Segmenter as printed (`geometry`, `classic`, `prior`).
     pub name: String,
     pub frames: usize,
     pub median_ms: f64,
@@ -94,29 +95,70 @@ pub fn time_segmenters(
     .collect()
 }
 
-/// Times the tiny-model ensemble (encoder, box proposals, box-prompted
-/// decoder, tagger, detector, mask-box matching) on the same frames.
+/// One SAM-family path on the tiny fixtures: medians per 640×480 frame of
+/// the whole `segment` call, of the model runs in it, and of the rest (ours).
+#[derive(Debug, Clone, PartialEq)]
+pub struct SamPathTiming {
+    /// `sam grid`, `sam grid + ensemble`, `mobilesamv2 boxes`, `mobilesamv2 boxes + ensemble`.
+    pub name: String,
+    /// How the decoder is prompted (`16x16 points`, `proposed boxes`).
+    pub prompts: String,
+    pub frames: usize,
+    pub runs: usize,
+    pub total_ms: f64,
+    /// Encoder + decoder + proposal runs (timed around each run), plus
+    /// tagger + detector (bare runs on inputs of the same shapes).
+    pub model_ms: f64,
+    /// Pre-processing, prompting, post-processing, painting, class matching.
+    pub ours_ms: f64,
+    /// Segments per frame, and of those the ones with a class name (means).
+    pub segments: f64,
+    pub classified: f64,
+}
+
+/// Times both SAM paths (grid points, proposed boxes), each without and with
+/// the tagger/detector ensemble, on the tiny fixtures with one ORT thread;
+/// `points_per_side` overrides the grid density ([`crate::sam::AmgParams`]).
 #[cfg(feature = "onnx")]
-pub fn time_tiny_ensemble(frames: usize, repeats: usize) -> Result<SegmentTiming, PerceptionError> {
+pub fn time_sam_paths(
+    frames: usize,
+    repeats: usize,
+    points_per_side: Option<u32>,
+) -> Result<Vec<SamPathTiming>, PerceptionError> {
     let dir = tiny::write_fixtures()?;
     let result = (|| {
-        let mut segmenter = SegmenterKind::MobileSamV2.create_with(&tiny::options(&dir.0))?;
-        time_one(
-            "tiny-ensemble",
-            segmenter.as_mut(),
-            &bench_frames(frames, 0)?,
-            repeats,
-        )
+        let bench = bench_frames(frames, 0)?;
+        let options = tiny::options(&dir.0);
+        let mut params = crate::sam::AmgParams::default();
+        if let Some(n) = points_per_side {
+            params.points_per_side = n;
+        }
+        let mut out = Vec::new();
+        for (boxes, ensemble) in [(false, false), (false, true), (true, false), (true, true)] {
+            out.push(tiny::time_sam_path(
+                &bench, &options, params, boxes, ensemble, repeats,
+            )?);
+        }
+        Ok(out)
     })();
     drop(dir);
     result
 }
 
-/// Prints the median milliseconds per 640×480 frame of each segmenter; the
-/// tiny-model ensemble too when built with `onnx` and ONNX Runtime loads
-/// (otherwise a line says why it is left out).
+/// Prints the median milliseconds per 640×480 frame of each segmenter, then
+/// (with `onnx` and ONNX Runtime) the SAM paths' table (otherwise a line says
+/// why it is left out).
 pub fn print_segment_bench(frames: usize, repeats: usize) -> Result<(), PerceptionError> {
-    let print = |t: &SegmentTiming| {
+    print_segment_bench_with(frames, repeats, None)
+}
+
+/// [`print_segment_bench`] with the SAM grid density set (`None`: the default).
+pub fn print_segment_bench_with(
+    frames: usize,
+    repeats: usize,
+    points_per_side: Option<u32>,
+) -> Result<(), PerceptionError> {
+    for t in time_segmenters(frames, repeats)? {
         println!(
             "segment/{:<13} median {:7.2} ms  min {:7.2} ms  per 640x480 frame ({:.1} segments, {:.1} with a class; {} frames x {} runs, {} cores available)",
             t.name,
@@ -127,29 +169,48 @@ pub fn print_segment_bench(frames: usize, repeats: usize) -> Result<(), Percepti
             t.frames,
             repeats.max(1),
             available_cores(),
-        )
-    };
-    for t in time_segmenters(frames, repeats)? {
-        print(&t);
+        );
     }
     #[cfg(feature = "onnx")]
-    match time_tiny_ensemble(frames, repeats) {
-        Ok(t) => {
-            print(&t);
-            println!(
-                "  (tiny-ensemble = MobileSAMv2 box prompts + RAM-style tagger + YOLO-World-style detector on the test fixtures: pipeline overhead, not model speed)"
-            );
-        }
+    match time_sam_paths(frames, repeats, points_per_side) {
+        Ok(rows) => print_sam_table(&rows),
         Err(PerceptionError::Unavailable { reason, .. }) => {
-            println!("segment/tiny-ensemble skipped: {reason}")
+            println!("segment/sam paths skipped: {reason}")
         }
         Err(e) => return Err(e),
     }
     #[cfg(not(feature = "onnx"))]
-    println!(
-        "segment/tiny-ensemble skipped: built without the `onnx` feature (--features opengs-perception/onnx)"
-    );
+    {
+        let _ = points_per_side;
+        println!(
+            "segment/sam paths skipped: built without the `onnx` feature (--features opengs-perception/onnx)"
+        );
+    }
     Ok(())
+}
+
+/// The SAM paths as a table: medians per frame, model time vs ours.
+pub fn print_sam_table(rows: &[SamPathTiming]) {
+    let Some(first) = rows.first() else { return };
+    println!(
+        "SAM paths on the tiny fixture models, per 640x480 frame, medians of {} frames x {} runs (ONNX Runtime 1 thread, {} cores available):",
+        first.frames,
+        first.runs / first.frames.max(1),
+        available_cores(),
+    );
+    println!(
+        "  {:<30} {:<16} {:>10} {:>10} {:>10} {:>9} {:>11}",
+        "path", "prompts", "total ms", "model ms", "ours ms", "segments", "with class"
+    );
+    for r in rows {
+        println!(
+            "  {:<30} {:<16} {:>10.1} {:>10.1} {:>10.1} {:>9.1} {:>11.1}",
+            r.name, r.prompts, r.total_ms, r.model_ms, r.ours_ms, r.segments, r.classified
+        );
+    }
+    println!(
+        "  (model = encoder + decoder + box-proposal runs, timed around each run, + tagger + detector, bare runs of the same input shapes; ours = the rest: pre-processing, prompting, mask post-processing, painting, class matching. The last row is what segment/tiny-ensemble printed before. Tiny models: pipeline overhead, not model speed.)"
+    );
 }
 
 /// Per-frame quality of one segmenter over the bench frames (means), and
@@ -230,8 +291,23 @@ fn available_cores() -> usize {
 #[cfg(feature = "onnx")]
 mod tiny {
     use std::path::{Path, PathBuf};
+    use std::time::Instant;
 
-    use crate::{EnsembleModelPaths, PerceptionError, SamModelPaths, SegmenterOptions};
+    use ndarray::{Array3, Array4};
+    use ort::session::Session;
+
+    use super::{BenchFrames, SamPathTiming};
+    use crate::ensemble::{Ensemble, EnsembleSegmenter};
+    use crate::model_check::{load_checked, session_signature, ModelRole};
+    use crate::npy::read_f32_matrix;
+    use crate::sam::{model_error, tensor, AmgParams, BoxProposer, ModelClock, SamSegmenter};
+    use crate::{
+        EnsembleModelPaths, PerceptionError, SamModelPaths, Segmenter, SegmenterInput,
+        SegmenterKind, SegmenterOptions,
+    };
+
+    /// One ONNX Runtime thread per session: the targets are for one core.
+    const THREADS: usize = 1;
 
     const FILES: [(&str, &[u8]); 7] = [
         (
@@ -286,6 +362,172 @@ mod tiny {
             std::fs::write(&path, bytes).map_err(|e| io(&path, e))?;
         }
         Ok(dir)
+    }
+
+    /// Times one SAM path: the runner as the factory builds it, wrapped in
+    /// the ensemble when `ensemble`; model time from the runner's clock plus
+    /// bare tagger/detector runs.
+    pub fn time_sam_path(
+        bench: &BenchFrames,
+        options: &SegmenterOptions,
+        params: AmgParams,
+        boxes: bool,
+        ensemble: bool,
+        repeats: usize,
+    ) -> Result<SamPathTiming, PerceptionError> {
+        let kind = if boxes {
+            SegmenterKind::MobileSamV2
+        } else {
+            SegmenterKind::Sam
+        };
+        let paths = options
+            .sam_models
+            .as_ref()
+            .ok_or_else(|| PerceptionError::InvalidInput("no SAM fixtures".into()))?;
+        let clock = ModelClock::default();
+        let mut sam = SamSegmenter::new(kind, paths, params, THREADS)?;
+        if boxes {
+            let proposals = options
+                .proposals
+                .as_ref()
+                .ok_or_else(|| PerceptionError::InvalidInput("no proposal fixture".into()))?;
+            sam = sam.with_box_proposals(BoxProposer::new(proposals, THREADS)?);
+        }
+        let sam = sam.with_model_clock(clock.clone());
+        let (mut segmenter, mut bare): (Box<dyn Segmenter>, _) = if ensemble {
+            let models = Ensemble::new(&options.ensemble, THREADS)?;
+            (
+                Box::new(EnsembleSegmenter::new(Box::new(sam), models)),
+                Some(BareEnsemble::new(&options.ensemble)?),
+            )
+        } else {
+            (Box::new(sam), None)
+        };
+        let (mut total, mut model, mut ours) = (Vec::new(), Vec::new(), Vec::new());
+        let (mut segments, mut classified) = (0usize, 0usize);
+        for frame in &bench.frames {
+            let input = SegmenterInput::from_frame(frame, bench.intrinsics, &bench.classes);
+            let warm = segmenter.segment(&input)?;
+            segments += warm.labels.len();
+            classified += warm.labels.iter().filter(|l| l.class.is_some()).count();
+            let ensemble_ms = match &mut bare {
+                Some(b) => b.median_ms(repeats)?,
+                None => 0.0,
+            };
+            for _ in 0..repeats.max(1) {
+                clock.take();
+                let start = Instant::now();
+                let out = segmenter.segment(&input)?;
+                let ms = start.elapsed().as_secs_f64() * 1e3;
+                let m = clock.take().as_secs_f64() * 1e3 + ensemble_ms;
+                std::hint::black_box(out);
+                total.push(ms);
+                model.push(m);
+                ours.push(ms - m);
+            }
+        }
+        let n = bench.frames.len().max(1) as f64;
+        Ok(SamPathTiming {
+            name: format!(
+                "{}{}",
+                if boxes {
+                    "mobilesamv2 boxes"
+                } else {
+                    "sam grid"
+                },
+                if ensemble { " + ensemble" } else { "" }
+            ),
+            prompts: if boxes {
+                "proposed boxes".into()
+            } else {
+                format!("{0}x{0} points", params.points_per_side)
+            },
+            frames: bench.frames.len(),
+            runs: total.len(),
+            total_ms: median(&mut total),
+            model_ms: median(&mut model),
+            ours_ms: median(&mut ours),
+            segments: segments as f64 / n,
+            classified: classified as f64 / n,
+        })
+    }
+
+    fn median(v: &mut [f64]) -> f64 {
+        v.sort_unstable_by(f64::total_cmp);
+        v.get(v.len() / 2).copied().unwrap_or(0.0)
+    }
+
+    /// The tagger and detector sessions alone, fed zeros of the shapes their
+    /// runners feed (the detector prompted with every tag: an upper bound).
+    struct BareEnsemble {
+        tagger: Option<(Session, Array4<f32>)>,
+        detector: Session,
+        images: Array4<f32>,
+        text: Array3<f32>,
+    }
+
+    impl BareEnsemble {
+        fn new(paths: &EnsembleModelPaths) -> Result<Self, PerceptionError> {
+            let missing = |what: &str| PerceptionError::InvalidInput(format!("no {what} fixture"));
+            let dim = |d: i64, default: usize| if d > 0 { d as usize } else { default };
+            let tagger = match &paths.tagger {
+                Some(p) => {
+                    let session = load_checked(p, ModelRole::Tagger, THREADS)?;
+                    let s = session_signature(&session).inputs[0].shape.clone();
+                    let image = Array4::zeros((1, 3, dim(s[2], 384), dim(s[3], 384)));
+                    Some((session, image))
+                }
+                None => None,
+            };
+            let path = paths.detector.as_ref().ok_or_else(|| missing("detector"))?;
+            let detector = load_checked(path, ModelRole::Detector, THREADS)?;
+            let sig = session_signature(&detector);
+            let shape = |name: &str| {
+                sig.inputs
+                    .iter()
+                    .find(|t| t.name == name)
+                    .map(|t| t.shape.clone())
+                    .ok_or_else(|| model_error(path, format!("no input named {name}")))
+            };
+            let (images, text) = (shape("images")?, shape("text_features")?);
+            let features = read_f32_matrix(
+                paths
+                    .text_embeddings
+                    .as_ref()
+                    .ok_or_else(|| missing("text embeddings"))?,
+            )?;
+            Ok(Self {
+                tagger,
+                images: Array4::zeros((1, 3, dim(images[2], 640), dim(images[3], 640))),
+                text: Array3::zeros((1, dim(text[1], features.rows), features.cols)),
+                detector,
+            })
+        }
+
+        /// Median ms of tagger + detector over `repeats` runs (after a warm-up).
+        fn median_ms(&mut self, repeats: usize) -> Result<f64, PerceptionError> {
+            let mut times = Vec::new();
+            for i in 0..=repeats.max(1) {
+                let start = Instant::now();
+                if let Some((session, image)) = &mut self.tagger {
+                    let path = Path::new("tagger");
+                    session
+                        .run(ort::inputs!["image" => tensor(image, path)?])
+                        .map_err(|e| model_error(path, e))?;
+                }
+                let path = Path::new("detector");
+                self.detector
+                    .run(ort::inputs![
+                        "images" => tensor(&self.images, path)?,
+                        "text_features" => tensor(&self.text, path)?,
+                    ])
+                    .map_err(|e| model_error(path, e))?;
+                if i > 0 {
+                    times.push(start.elapsed().as_secs_f64() * 1e3);
+                }
+            }
+            Ok(median(&mut times))
+        }
     }
 
     pub fn options(dir: &Path) -> SegmenterOptions {

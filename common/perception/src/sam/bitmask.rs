@@ -1,4 +1,4 @@
-//! Binary masks as bit sets: mask IoU for NMS is a popcount over words.
+//! Binary frame-size masks as bit sets, with their area and box.
 
 #[derive(Debug, Clone, PartialEq)]
 pub struct BitMask {
@@ -9,7 +9,30 @@ pub struct BitMask {
 }
 
 impl BitMask {
+    /// No pixel of a `len`-pixel frame.
+    pub fn zeros(len: usize) -> Self {
+        Self {
+            words: vec![0u64; len.div_ceil(64)],
+            area: 0,
+            bbox: [usize::MAX, usize::MAX, 0, 0],
+        }
+    }
+
+    /// Adds pixel (x, y) of a `width`-wide frame (once per pixel).
+    pub fn insert(&mut self, x: usize, y: usize, width: usize) {
+        let i = y * width + x;
+        self.words[i / 64] |= 1 << (i % 64);
+        self.area += 1;
+        self.bbox = [
+            self.bbox[0].min(x),
+            self.bbox[1].min(y),
+            self.bbox[2].max(x),
+            self.bbox[3].max(y),
+        ];
+    }
+
     /// Pixels whose value passes `inside`, row-major `width` wide.
+    #[cfg(test)]
     pub fn from_fn(values: &[f32], width: usize, inside: impl Fn(f32) -> bool) -> Self {
         let mut words = vec![0u64; values.len().div_ceil(64)];
         let mut area = 0;
@@ -34,6 +57,7 @@ impl BitMask {
         self.words[i / 64] >> (i % 64) & 1 == 1
     }
 
+    #[cfg(test)]
     pub fn intersection(&self, other: &Self) -> usize {
         self.words
             .iter()
@@ -42,6 +66,7 @@ impl BitMask {
             .sum()
     }
 
+    #[cfg(test)]
     pub fn iou(&self, other: &Self) -> f32 {
         if !self.boxes_overlap(other) {
             return 0.0;
@@ -55,6 +80,7 @@ impl BitMask {
         }
     }
 
+    #[cfg(test)]
     fn boxes_overlap(&self, o: &Self) -> bool {
         self.area > 0
             && o.area > 0

@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 
 use ort::session::Session;
 
-use super::{model_error, tensor};
+use super::{model_error, tensor, ModelClock};
 use crate::ensemble::{letterbox, nms};
 use crate::model_check::{load_checked, session_signature, ModelRole};
 use crate::{PerceptionError, SegmenterInput};
@@ -22,6 +22,8 @@ pub struct BoxProposer {
     pub conf: f32,
     pub nms_iou: f32,
     pub max_boxes: usize,
+    /// Where the model run's time goes (the segmenter's clock once attached).
+    pub(crate) clock: ModelClock,
 }
 
 impl BoxProposer {
@@ -45,6 +47,7 @@ impl BoxProposer {
             conf: 0.4,
             nms_iou: 0.9,
             max_boxes: 320,
+            clock: ModelClock::default(),
         })
     }
 
@@ -53,9 +56,11 @@ impl BoxProposer {
         let (w, h) = (input.width as usize, input.height as usize);
         let (image, geometry) = letterbox(input.rgb, w, h, self.side);
         let path = &self.path;
+        let inputs = ort::inputs!["images" => tensor(&image, path)?];
+        let session = &mut self.session;
         let outputs = self
-            .session
-            .run(ort::inputs!["images" => tensor(&image, path)?])
+            .clock
+            .time(|| session.run(inputs))
             .map_err(|e| model_error(path, e))?;
         let out = outputs
             .get("output0")

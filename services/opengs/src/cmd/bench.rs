@@ -28,7 +28,9 @@ enum BenchWhat {
         #[arg(long, default_value_t = 50)]
         runs: usize,
     },
-    /// Segmenters (geometry, classic, prior, tiny-model ensemble with `onnx`) per 640×480 synthetic frame.
+    /// Segmenters per 640×480 synthetic frame: geometry, classic, prior, and with `onnx` both
+    /// SAM paths (grid points, proposed boxes; without and with the tagger/detector) on the tiny
+    /// fixture models, split into model time and our own.
     Segment {
         /// Frames to segment.
         #[arg(long, default_value_t = 8)]
@@ -36,6 +38,9 @@ enum BenchWhat {
         /// Repeats per frame.
         #[arg(long, default_value_t = 3)]
         repeats: usize,
+        /// SAM grid path: prompts on an N×N point grid (default: the segmenter's default).
+        #[arg(long)]
+        points_per_side: Option<u32>,
         /// Instead of timing alone: per-frame quality against the ground-truth instances
         /// (Hungarian mIoU, split and merge shares, ms per frame) of geometry, classic, prior.
         #[arg(long)]
@@ -60,10 +65,13 @@ pub fn run(args: BenchArgs) -> anyhow::Result<()> {
         BenchWhat::Segment {
             frames,
             repeats,
+            points_per_side,
             quality: false,
             ..
-        } => Ok(opengs_perception::bench::print_segment_bench(
-            frames, repeats,
+        } => Ok(opengs_perception::bench::print_segment_bench_with(
+            frames,
+            repeats,
+            points_per_side,
         )?),
         BenchWhat::Segment {
             frames,
