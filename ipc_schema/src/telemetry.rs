@@ -20,6 +20,8 @@ pub enum TelemetryEvent {
     /// Long work after the end of data (the mapper's final optimisation): `work_done` of
     /// `work_total` steps.
     Progress = 5,
+    /// Nothing else to report for a while, but alive (the supervisor's watchdog).
+    Heartbeat = 6,
 }
 
 impl TelemetryEvent {
@@ -30,6 +32,7 @@ impl TelemetryEvent {
             3 => Self::Dropped,
             4 => Self::Finished,
             5 => Self::Progress,
+            6 => Self::Heartbeat,
             _ => return None,
         })
     }

@@ -35,6 +35,18 @@ impl RunDir {
         self.file("map_checkpoint.ply")
     }
 
+    /// The mapper's counters as of its checkpoint (keyframes, steps, restarts), so a
+    /// restarted mapper's report counts the whole run.
+    pub fn map_checkpoint_counters(&self) -> PathBuf {
+        self.file("map_checkpoint.json")
+    }
+
+    /// Written by the supervisor when it restarts the tracker: the verified keyframe poses and,
+    /// last, the last verified pose (TUM format), which the new tracker goes on from.
+    pub fn tracker_resume(&self) -> PathBuf {
+        self.file("tracker_resume.txt")
+    }
+
     /// The map after `opengs refine`.
     pub fn map_refined(&self) -> PathBuf {
         self.file("map_refined.ply")

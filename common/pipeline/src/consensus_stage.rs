@@ -15,6 +15,7 @@ use opengs_ipc_schema::{
 };
 use opengs_runtime::{
     waitset, CallbackProgression, Inlet, Outlet, RunContext, TelemetrySink, WaitSetRunResult,
+    HEARTBEAT,
 };
 use opengs_semantics::{
     ConsensusConfig, ConsensusOutput, GlobalLabelTable, InputLabelClass, LabelConsensus,
@@ -395,6 +396,9 @@ pub fn run_consensus(ctx: &RunContext, out_dir: &Path, args: &ConsensusArgs) -> 
     let _g2 = ws
         .attach_notification(renders.listener())
         .map_err(|e| anyhow::anyhow!("WaitSet: {e:?}"))?;
+    let _heartbeat = ws
+        .attach_interval(HEARTBEAT)
+        .map_err(|e| anyhow::anyhow!("WaitSet: {e:?}"))?;
     stage.telemetry.ready();
     loop {
         match ws.wait_and_process_once(|_| CallbackProgression::Continue) {
@@ -402,6 +406,7 @@ pub fn run_consensus(ctx: &RunContext, out_dir: &Path, args: &ConsensusArgs) -> 
             Err(e) => anyhow::bail!("WaitSet: {e:?}"),
             Ok(_) => {}
         }
+        stage.telemetry.alive();
         segments.clear_wakeups();
         renders.clear_wakeups();
         while let Some(s) = segments.receive()? {

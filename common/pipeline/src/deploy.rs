@@ -63,6 +63,11 @@ pub struct StageSpec {
     /// runs out. 0 = none; Ctrl-C always stops at once.
     #[serde(default)]
     pub finish_timeout_s: f64,
+    /// Seconds a ready stage may send nothing (no output, no heartbeat) before the
+    /// supervisor takes it for hung, kills and restarts it; above the longest single
+    /// message (a SAM keyframe on a CPU). 0 = no watchdog.
+    #[serde(default = "default_watchdog")]
+    pub watchdog_s: f64,
 }
 
 /// The arguments of one kind of a swappable stage.
@@ -126,6 +131,10 @@ impl Scheduler {
 
 fn default_restart_limit() -> u32 {
     3
+}
+
+fn default_watchdog() -> f64 {
+    10.0
 }
 
 fn default_startup_timeout() -> f64 {
@@ -205,6 +214,12 @@ impl DeployFile {
         }
         let mut names = std::collections::BTreeSet::new();
         for s in &self.stages {
+            if !(s.watchdog_s.is_finite() && s.watchdog_s >= 0.0) {
+                return Err(invalid(format!(
+                    "stage '{}': watchdog_s must be ≥ 0 seconds (0 = off), got {}",
+                    s.name, s.watchdog_s
+                )));
+            }
             if !(s.finish_timeout_s.is_finite() && s.finish_timeout_s >= 0.0) {
                 return Err(invalid(format!(
                     "stage '{}': finish_timeout_s must be ≥ 0 seconds, got {}",
@@ -330,6 +345,12 @@ mod tests {
             .expect_err("nice")
             .to_string()
             .contains("nice"));
+        let bad_watchdog =
+            "[[stages]]\nname = \"a\"\nbinary = \"a\"\nrole = \"source\"\nwatchdog_s = -1\n";
+        assert!(DeployFile::parse(bad_watchdog, p)
+            .expect_err("watchdog")
+            .to_string()
+            .contains("watchdog_s must be ≥ 0"));
     }
 
     #[test]

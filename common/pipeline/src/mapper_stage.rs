@@ -22,6 +22,7 @@ use opengs_mapping::{
 };
 use opengs_runtime::{
     waitset, CallbackProgression, Inlet, Outlet, RunContext, TelemetrySink, WaitSetRunResult,
+    HEARTBEAT,
 };
 use opengs_semantics::{CounterPruneRegion, RelabelInstruction};
 use opengs_splat::{read_ply_file, write_ply_file, Camera, GaussianMap};
@@ -51,8 +52,10 @@ impl MapperRunFlags {
 /// Options of the mapper stage.
 #[derive(clap::Args, Debug, Clone)]
 pub struct MapperArgs {
-    /// Seconds between map checkpoints.
-    #[arg(long, default_value_t = 10.0)]
+    /// Seconds between map checkpoints while only the optimisation changes the map; a new
+    /// keyframe or consensus is checkpointed within a second (the first keyframe at once).
+    /// Written on a thread of their own, so optimisation never waits for the disk.
+    #[arg(long, default_value_t = 3.0)]
     pub checkpoint_every: f64,
     /// Optimise at full resolution instead of half.
     #[arg(long)]
@@ -84,6 +87,103 @@ fn write_map_atomically(map: &GaussianMap, path: &Path) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// What the mapper has done, kept with its checkpoint so a restarted mapper counts on.
+#[derive(Debug, Clone, Copy, Default, serde::Serialize, serde::Deserialize, PartialEq)]
+pub struct MapperCounters {
+    pub keyframes: usize,
+    pub iterations: u64,
+    /// Times the mapper was restarted from a checkpoint.
+    pub restarts: u32,
+}
+
+impl MapperCounters {
+    /// The counters of the checkpoint in `run`, or none (a first start, or unreadable: said).
+    fn load(run: &RunDir) -> Self {
+        let path = run.map_checkpoint_counters();
+        match std::fs::read_to_string(&path) {
+            Ok(text) => serde_json::from_str(&text).unwrap_or_else(|e| {
+                tracing::warn!("{}: {e}; counting from zero", path.display());
+                Self::default()
+            }),
+            Err(_) => Self::default(),
+        }
+    }
+
+    fn plus(self, keyframes: usize, iterations: u64) -> Self {
+        Self {
+            keyframes: self.keyframes + keyframes,
+            iterations: self.iterations + iterations,
+            restarts: self.restarts,
+        }
+    }
+}
+
+/// Checkpoints off the optimisation path: the map is copied (a few MB) and written, with its
+/// counters, by a thread of its own; one write at a time, each atomic.
+struct Checkpointer {
+    run: RunDir,
+    every: Duration,
+    last: Option<Instant>,
+    /// (keyframes, consensus results) the last checkpoint holds.
+    holds: (usize, u64),
+    writing: Option<std::thread::JoinHandle<anyhow::Result<()>>>,
+}
+
+/// A new keyframe or label change is checkpointed at most this long after the last one.
+const CHECKPOINT_NEWS: Duration = Duration::from_secs(1);
+
+impl Checkpointer {
+    /// Starts a write when one is due: at the first keyframe; within [`CHECKPOINT_NEWS`]
+    /// of a keyframe or consensus the last checkpoint lacks (what a restart could not get
+    /// back: the tracker does not resend keyframes, and labels lost would come back as new
+    /// ones); otherwise every `every` for the optimisation's progress.
+    fn maybe(&mut self, map: &GaussianMap, counters: MapperCounters, consensus: u64) {
+        let news = (counters.keyframes, consensus) != self.holds;
+        let due = match self.last {
+            None => true,
+            Some(t) => t.elapsed() >= self.every || (news && t.elapsed() >= CHECKPOINT_NEWS),
+        };
+        if map.is_empty() || !due {
+            return;
+        }
+        if self.writing.as_ref().is_some_and(|w| !w.is_finished()) {
+            return;
+        }
+        self.join();
+        let (map, run) = (map.clone(), self.run.clone());
+        self.last = Some(Instant::now());
+        self.holds = (counters.keyframes, consensus);
+        self.writing = Some(std::thread::spawn(move || {
+            write_checkpoint(&run, &map, counters)
+        }));
+    }
+
+    /// Waits for the write in flight, reporting its failure.
+    fn join(&mut self) {
+        if let Some(w) = self.writing.take() {
+            match w.join() {
+                Ok(Ok(())) => {}
+                Ok(Err(e)) => tracing::error!("checkpoint failed: {e:#}"),
+                Err(_) => tracing::error!("checkpoint writer panicked"),
+            }
+        }
+    }
+}
+
+/// The map, then its counters, each atomically.
+fn write_checkpoint(
+    run: &RunDir,
+    map: &GaussianMap,
+    counters: MapperCounters,
+) -> anyhow::Result<()> {
+    write_map_atomically(map, &run.map_checkpoint())?;
+    let path = run.map_checkpoint_counters();
+    let tmp = path.with_extension("json.tmp");
+    std::fs::write(&tmp, serde_json::to_string(&counters)?)?;
+    std::fs::rename(&tmp, &path)?;
+    Ok(())
+}
+
 struct MapperStage {
     mapper: Mapper,
     map_target: Outlet<MapTargetHeader>,
@@ -97,6 +197,10 @@ struct MapperStage {
     top_k: usize,
     telemetry: TelemetrySink,
     map_version: u32,
+    /// Counters of the checkpoint this process resumed from (zero on a first start).
+    resumed: MapperCounters,
+    /// Consensus results applied by this process.
+    consensus_applied: u64,
     out_dir: PathBuf,
     /// Full-resolution keyframes for the final optimisation (only when it is asked for).
     kept: Option<KeptKeyframes>,
@@ -292,6 +396,7 @@ impl MapperStage {
                     done.labelled,
                     done.pruned
                 );
+                self.consensus_applied += 1;
                 self.telemetry.processed(&h.stamp, start, now_ns());
             }
             Err(e) => {
@@ -301,16 +406,10 @@ impl MapperStage {
         }
     }
 
-    fn checkpoint(&self) {
-        if self.mapper.map().is_empty() {
-            return;
-        }
-        if let Err(e) = write_map_atomically(
-            self.mapper.map(),
-            &RunDir::new(&self.out_dir).map_checkpoint(),
-        ) {
-            tracing::error!("checkpoint failed: {e:#}");
-        }
+    /// Counters of the whole run: those of the checkpoint resumed from, plus this process's.
+    fn counters(&self) -> MapperCounters {
+        self.resumed
+            .plus(self.mapper.keyframes(), self.mapper.iterations())
     }
 }
 
@@ -327,16 +426,27 @@ pub fn run_mapper(ctx: &RunContext, out_dir: &Path, args: &MapperArgs) -> anyhow
     let near = config.near;
     let run = RunDir::new(out_dir);
     let checkpoint = run.map_checkpoint();
-    let mapper = if checkpoint.exists() {
+    let (mapper, resumed) = if checkpoint.exists() {
         let map = read_ply_file(&checkpoint)?;
-        tracing::info!(
-            "resuming from {} ({} Gaussians)",
+        let mut counters = MapperCounters::load(&run);
+        counters.restarts += 1;
+        tracing::warn!(
+            "restarted: resuming from {} ({} Gaussians, {} keyframes mapped before; restart {})",
             checkpoint.display(),
-            map.len()
+            map.len(),
+            counters.keyframes,
+            counters.restarts
         );
-        Mapper::with_map(config.clone(), map)
+        (Mapper::with_map(config.clone(), map), counters)
     } else {
-        Mapper::new(config.clone())
+        (Mapper::new(config.clone()), MapperCounters::default())
+    };
+    let mut checkpointer = Checkpointer {
+        run: run.clone(),
+        every: Duration::from_secs_f64(args.checkpoint_every.max(0.1)),
+        last: None,
+        holds: (0, 0),
+        writing: None,
     };
     let mut stage = MapperStage {
         mapper,
@@ -348,6 +458,8 @@ pub fn run_mapper(ctx: &RunContext, out_dir: &Path, args: &MapperArgs) -> anyhow
         top_k: args.top_k.max(1),
         telemetry: TelemetrySink::new(ctx, &node, "mapper")?,
         map_version: 0,
+        resumed,
+        consensus_applied: 0,
         out_dir: out_dir.to_path_buf(),
         kept: (args.run.finish_steps > 0).then(|| KeptKeyframes::new(args.finish_keyframes)),
     };
@@ -365,13 +477,13 @@ pub fn run_mapper(ctx: &RunContext, out_dir: &Path, args: &MapperArgs) -> anyhow
         .attach_notification(consensus.listener())
         .map_err(|e| anyhow::anyhow!("WaitSet: {e:?}"))?;
     let _tick = ws
-        .attach_interval(Duration::from_secs(3600))
+        .attach_interval(HEARTBEAT)
         .map_err(|e| anyhow::anyhow!("WaitSet: {e:?}"))?;
     let finish = finish_requested_flag(&ws)?;
     stage.telemetry.ready();
     let started = Instant::now();
-    let mut last_checkpoint = Instant::now();
     let mut finishing: Option<Instant> = None;
+    let mut last_connect = Instant::now();
     let mut ended_by_finish = false;
     loop {
         // Block only when there is nothing to optimise; otherwise just look for news.
@@ -386,6 +498,14 @@ pub fn run_mapper(ctx: &RunContext, out_dir: &Path, args: &MapperArgs) -> anyhow
             Ok(WaitSetRunResult::Interrupt) if !finish.load(Ordering::Relaxed) => break,
             Err(e) => anyhow::bail!("WaitSet: {e:?}"),
             Ok(_) => {}
+        }
+        stage.telemetry.alive();
+        if last_connect.elapsed() >= HEARTBEAT {
+            // A restarted tracker gets the newest map target now, not after the next keyframe.
+            if let Err(e) = stage.map_target.update_connections() {
+                tracing::debug!("{e}");
+            }
+            last_connect = Instant::now();
         }
         keyframes.clear_wakeups();
         segments.clear_wakeups();
@@ -427,18 +547,21 @@ pub fn run_mapper(ctx: &RunContext, out_dir: &Path, args: &MapperArgs) -> anyhow
         }
         let mapper = &mut stage.mapper;
         pool.install(|| mapper.step());
-        if last_checkpoint.elapsed().as_secs_f64() >= args.checkpoint_every {
-            stage.checkpoint();
-            last_checkpoint = Instant::now();
-        }
+        checkpointer.maybe(
+            stage.mapper.map(),
+            stage.counters(),
+            stage.consensus_applied,
+        );
     }
+    checkpointer.join();
     let mapping_seconds = started.elapsed().as_secs_f64();
-    let iterations = stage.mapper.iterations();
-    let keyframes = stage.mapper.keyframes();
+    let counters = stage.counters();
     let finishing = ended_by_finish && stage.kept.is_some();
-    if finishing {
+    if finishing && !stage.mapper.map().is_empty() {
         // The online map is safe before the final optimisation starts.
-        stage.checkpoint();
+        if let Err(e) = write_checkpoint(&run, stage.mapper.map(), counters) {
+            tracing::error!("checkpoint failed: {e:#}");
+        }
     }
     let MapperStage {
         mapper,
@@ -512,14 +635,17 @@ pub fn run_mapper(ctx: &RunContext, out_dir: &Path, args: &MapperArgs) -> anyhow
     let seconds = started.elapsed().as_secs_f64();
     if !map.is_empty() {
         write_map_atomically(&map, &run.map())?;
-        write_map_atomically(&map, &run.map_checkpoint())?;
+        write_checkpoint(&run, &map, counters)?;
     }
     let stats = serde_json::json!({
-        "iterations": iterations,
+        // The whole run's, across restarts; the rate is this process's.
+        "iterations": counters.iterations,
         "seconds": mapping_seconds,
-        "iterations_per_s": iterations as f64 / mapping_seconds.max(1e-9),
+        "iterations_per_s": (counters.iterations - resumed.iterations) as f64
+            / mapping_seconds.max(1e-9),
         "gaussians": map.len(),
-        "keyframes": keyframes,
+        "keyframes": counters.keyframes,
+        "restarts": counters.restarts,
         "bytes_per_gaussian": GaussianMap::bytes_per_gaussian(),
         "final_optimisation": finish_stats,
         "holes_filled": holes_filled,

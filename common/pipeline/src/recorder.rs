@@ -57,6 +57,26 @@ impl Recorder {
         self.frames.is_empty()
     }
 
+    /// What a restarted tracker goes on from: the verified keyframe poses, then the last
+    /// verified pose (empty before the first).
+    pub fn resume_poses(&self) -> Vec<TimedPose> {
+        let verified = || self.frames.values().filter(|f| f.status.has_pose());
+        let mut poses: Vec<TimedPose> = verified()
+            .filter(|f| f.keyframe)
+            .map(|f| TimedPose {
+                timestamp: f.timestamp,
+                pose: f.pose,
+            })
+            .collect();
+        if let Some(last) = verified().next_back() {
+            poses.push(TimedPose {
+                timestamp: last.timestamp,
+                pose: last.pose,
+            });
+        }
+        poses
+    }
+
     pub fn keyframes(&self) -> usize {
         self.frames.values().filter(|f| f.keyframe).count()
     }

@@ -144,4 +144,29 @@ mod tests {
         }
         assert!(flags.for_stage(stage_names::SEGMENTER).is_empty());
     }
+
+    #[test]
+    fn a_restarted_tracker_reads_back_the_poses_to_resume_from() {
+        use opengs_geometry::nalgebra::{Translation3, UnitQuaternion};
+        let dir = tempfile::tempdir().expect("tmp");
+        let pose = |x: f64| {
+            opengs_geometry::Pose::from_parts(
+                Translation3::new(x, 0.5, -2.0),
+                UnitQuaternion::from_euler_angles(0.1, -0.2, x),
+            )
+        };
+        let poses = [0.0, 0.25, 0.5].map(|x| opengs_eval::TimedPose {
+            timestamp: 1305031102.175 + x,
+            pose: pose(x),
+        });
+        let path = dir.path().join("tracker_resume.txt");
+        let args = crate::tracker_stage::resume_args(&path, &poses).expect("written");
+        let tracker: TrackerArgs = parse(&args);
+        let back = opengs_eval::read_tum_trajectory(&tracker.resume.expect("file")).expect("read");
+        assert_eq!(back.len(), 3);
+        let last = back.last().expect("last");
+        assert!((last.pose.translation.vector - pose(0.5).translation.vector).norm() < 1e-6);
+        assert!(last.pose.rotation.angle_to(&pose(0.5).rotation) < 1e-6);
+        assert!((last.timestamp - 1305031102.675).abs() < 1e-6);
+    }
 }

@@ -23,6 +23,9 @@ pub struct RunRecord {
 pub struct StageRecord {
     pub name: String,
     pub restarts: u32,
+    /// Of the restarts, those after the watchdog found it hung (silent past its `watchdog_s`).
+    #[serde(default)]
+    pub hangs: u32,
     /// Messages it processed.
     pub processed: u64,
     /// Sequence number of the last message it processed.
@@ -76,6 +79,7 @@ mod tests {
             stages: vec![StageRecord {
                 name: "tracker".into(),
                 restarts: 1,
+                hangs: 1,
                 processed: 29,
                 last_seq: Some(29),
             }],

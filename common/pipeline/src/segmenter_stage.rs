@@ -11,6 +11,7 @@ use opengs_ipc_schema::{now_ns, KeyframeHeader, MessageKind, SegmentLabel, Segme
 use opengs_perception::{SamModelPaths, SegmenterInput, SegmenterKind, SegmenterOptions};
 use opengs_runtime::{
     waitset, CallbackProgression, Inlet, Outlet, RunContext, TelemetrySink, WaitSetRunResult,
+    HEARTBEAT,
 };
 
 use crate::DatasetArgs;
@@ -83,6 +84,9 @@ pub fn run_segmenter(ctx: &RunContext, args: &SegmenterArgs) -> anyhow::Result<(
         .attach_notification(keyframes.listener())
         .map_err(|e| anyhow::anyhow!("WaitSet: {e:?}"))?;
     tracing::info!("segmenter '{}' ready", segmenter.name());
+    let _heartbeat = ws
+        .attach_interval(HEARTBEAT)
+        .map_err(|e| anyhow::anyhow!("WaitSet: {e:?}"))?;
     telemetry.ready();
     loop {
         match ws.wait_and_process_once(|_| CallbackProgression::Continue) {
@@ -90,6 +94,7 @@ pub fn run_segmenter(ctx: &RunContext, args: &SegmenterArgs) -> anyhow::Result<(
             Err(e) => anyhow::bail!("WaitSet: {e:?}"),
             Ok(_) => {}
         }
+        telemetry.alive();
         keyframes.clear_wakeups();
         let (newest, skipped) = keyframes.receive_newest()?;
         let Some(sample) = newest else { continue };

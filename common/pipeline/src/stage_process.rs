@@ -34,6 +34,10 @@ pub struct StageProcess {
     child: Option<Child>,
     pid: Option<u32>,
     started_at: Instant,
+    /// Last telemetry from the running process (the watchdog's clock).
+    last_heard: Instant,
+    /// Times the watchdog killed it.
+    pub hangs: u32,
     restart_at: Option<Instant>,
     log_path: PathBuf,
 }
@@ -76,6 +80,8 @@ impl StageProcess {
             child: None,
             pid: None,
             started_at: Instant::now(),
+            last_heard: Instant::now(),
+            hangs: 0,
             restart_at: None,
             log_path,
         }
@@ -154,6 +160,7 @@ impl StageProcess {
         self.child = Some(child);
         self.state = StageState::Starting;
         self.started_at = Instant::now();
+        self.last_heard = Instant::now();
         self.restart_at = None;
         Ok(())
     }
@@ -183,6 +190,31 @@ impl StageProcess {
             }
             None => false,
         }
+    }
+
+    /// Telemetry arrived from `pid`: the process is alive if it is this one.
+    pub fn heard_from(&mut self, pid: u32) {
+        if self.pid == Some(pid) {
+            self.last_heard = Instant::now();
+        }
+    }
+
+    /// Ready but silent for longer than its `watchdog_s`: hung, stopped or deadlocked.
+    pub fn silent_for(&self) -> Option<Duration> {
+        let limit = self.spec.watchdog_s;
+        let silent = self.last_heard.elapsed();
+        (limit > 0.0
+            && self.state == StageState::Ready
+            && self.child.is_some()
+            && silent.as_secs_f64() > limit)
+            .then_some(silent)
+    }
+
+    /// SIGKILL, leaving the exit to [`Self::poll_exit`] (a stopped process cannot act on SIGTERM).
+    pub fn kill_hung(&mut self) {
+        self.hangs += 1;
+        self.state = StageState::Stopped;
+        self.signal(libc::SIGKILL);
     }
 
     pub fn is_running(&self) -> bool {

@@ -19,7 +19,7 @@ use opengs_runtime::{
 };
 use opengs_telemetry::{ChromeTrace, LatencyProfile, StageSample};
 
-use crate::deploy::{DeployFile, StageRole};
+use crate::deploy::{stage_names, DeployFile, StageRole};
 use crate::progress::Progress;
 use crate::recorder::Recorder;
 use crate::run_options::{RunOptions, StageFlags};
@@ -85,6 +85,16 @@ impl Supervisor {
                 opts.out_dir.display()
             )
         })?;
+        // A new run starts from nothing: a mapper checkpoint an earlier run left in this
+        // directory would otherwise be "resumed" by the first restart.
+        let run_dir = RunDir::new(&opts.out_dir);
+        for stale in [run_dir.map_checkpoint(), run_dir.map_checkpoint_counters()] {
+            if stale.exists() {
+                std::fs::remove_file(&stale).map_err(|e| {
+                    anyhow::anyhow!("cannot remove an earlier run's {}: {e}", stale.display())
+                })?;
+            }
+        }
         let ctx = RunContext::new(&opts.run_id)?;
         ctx.cleanup_dead_nodes();
         let registry = ActiveRuns::default();
@@ -140,6 +150,7 @@ impl Supervisor {
             .map(|s| StageRecord {
                 name: s.spec.name.clone(),
                 restarts: s.restarts,
+                hangs: s.hangs,
                 processed: s.processed,
                 last_seq: s.last_seq,
             })
@@ -234,6 +245,17 @@ impl RunState {
         }
         if let Some(kind) = &s.spec.kind {
             a.extend(["--kind".to_string(), kind.clone()]);
+        }
+        // A restarted tracker goes on from the last pose it published.
+        if s.spec.name == stage_names::TRACKER && s.restarts > 0 {
+            let poses = self.recorder.resume_poses();
+            if !poses.is_empty() {
+                let path = RunDir::new(&self.out_dir).tracker_resume();
+                match crate::tracker_stage::resume_args(&path, &poses) {
+                    Ok(args) => a.extend(args),
+                    Err(e) => tracing::error!("the tracker restarts from scratch: {e}"),
+                }
+            }
         }
         a.extend(self.stage_flags.for_stage(&s.spec.name));
         a
@@ -364,6 +386,7 @@ impl RunState {
             let Some(i) = self.stage_index(&name) else {
                 continue;
             };
+            self.stages[i].heard_from(h.pid);
             if let Some(swap) = self.swap.as_mut().filter(|s| s.index == i) {
                 match event {
                     TelemetryEvent::Ready => swap.observe_ready(h.pid),
@@ -394,6 +417,7 @@ impl RunState {
                 }
                 TelemetryEvent::Dropped => self.profile.record_drop(&name),
                 TelemetryEvent::Progress => stage.work = Some((h.work_done, h.work_total)),
+                TelemetryEvent::Heartbeat => {}
                 TelemetryEvent::Finished => {
                     if stage.spec.role == StageRole::Source && self.end_of_data.is_none() {
                         self.end_of_data = Some((h.stamp.seq, Instant::now()));
@@ -540,6 +564,17 @@ impl RunState {
     /// Reaps exited stages, restarts them with back-off; `Some(reason)` when one is out of restarts.
     fn watch_children(&mut self, ctx: &RunContext) -> anyhow::Result<Option<String>> {
         for i in 0..self.stages.len() {
+            if let Some(silent) = self.stages[i].silent_for() {
+                self.note(&format!(
+                    "stage {} (pid {}) sent nothing for {:.1} s (watchdog_s {}): hung or stopped; \
+                     killing it",
+                    self.stages[i].spec.name,
+                    self.stages[i].pid().unwrap_or(0),
+                    silent.as_secs_f64(),
+                    self.stages[i].spec.watchdog_s
+                ));
+                self.stages[i].kill_hung();
+            }
             if let Some(status) = self.stages[i].poll_exit() {
                 let name = self.stages[i].spec.name.clone();
                 let clean = status.success();

@@ -8,6 +8,7 @@ use opengs_ipc_schema::{
 };
 use opengs_runtime::{
     waitset, CallbackProgression, Inlet, Outlet, RunContext, TelemetrySink, WaitSetRunResult,
+    HEARTBEAT,
 };
 use opengs_tracking::{
     DepthFrame, FrameTracker, MapGaussians, ModelUpdate, TrackOutcome, TrackStatus, TrackerConfig,
@@ -24,6 +25,20 @@ pub struct TrackerArgs {
     /// Keep tracking against the tracker's own keyframe model even when the mapper sends Gaussians.
     #[arg(long)]
     pub ignore_map: bool,
+    /// Set by the supervisor when it restarts the tracker: a TUM file of the verified keyframe
+    /// poses and, last, the last verified pose, which the tracker goes on from (not the identity).
+    #[arg(long)]
+    pub resume: Option<std::path::PathBuf>,
+}
+
+/// Writes the poses a restarted tracker goes on from (`poses`: the verified keyframes, then the
+/// last verified pose) to `path`; the tracker's arguments that read them.
+pub fn resume_args(
+    path: &std::path::Path,
+    poses: &[opengs_eval::TimedPose],
+) -> Result<Vec<String>, opengs_eval::TrajectoryError> {
+    opengs_eval::write_tum_trajectory(path, poses)?;
+    Ok(vec!["--resume".into(), path.display().to_string()])
 }
 
 /// The tracker's flags that `opengs run` sets ([`crate::run_options::StageFlags`]); one struct for
@@ -57,6 +72,10 @@ fn status_of(s: TrackStatus) -> PoseStatus {
 
 struct TrackerStage {
     tracker: Option<FrameTracker>,
+    /// Where a restarted tracker goes on from (pose, capture time), and its keyframe poses.
+    resume: Option<(opengs_geometry::Pose, f64, Vec<opengs_geometry::Pose>)>,
+    /// A map that arrived before the first frame (a restart: the newest map is kept for it).
+    early_map: Option<(u64, MapGaussians)>,
     pool: rayon::ThreadPool,
     poses: Outlet<PoseHeader>,
     keyframes: Outlet<KeyframeHeader>,
@@ -75,13 +94,14 @@ impl TrackerStage {
                 return;
             }
         };
-        let Some(tracker) = self.tracker.as_mut() else {
-            return;
-        };
         let gaussians = MapGaussians {
             means: view.means.to_vec(),
             rotations: view.rotations.to_vec(),
             scales: view.scales.to_vec(),
+        };
+        let Some(tracker) = self.tracker.as_mut() else {
+            self.early_map = Some((h.stamp.seq, gaussians));
+            return;
         };
         tracing::debug!(
             "map v{} as of keyframe #{} ({} Gaussians) to the model thread",
@@ -111,6 +131,21 @@ impl TrackerStage {
                 if let Ok(p) = pose_from_tum(&h.gt_pose) {
                     t.set_first_pose(p);
                 }
+            }
+            let had_map = self.early_map.is_some();
+            if let Some((seq, map)) = self.early_map.take() {
+                t.set_map(seq, map);
+            }
+            if let Some((pose, time, keyframes)) = self.resume.take() {
+                tracing::info!(
+                    "restarted: going on from the last published pose (t = {time:.3} s); {}",
+                    if had_map {
+                        "registering against the map"
+                    } else {
+                        "no map yet: a new model starts there"
+                    }
+                );
+                t.resume_from(pose, time, keyframes);
             }
             self.tracker = Some(t);
         }
@@ -212,13 +247,61 @@ fn log_outcome(seq: u64, out: &TrackOutcome) {
     }
 }
 
+/// How long a restarted tracker waits for the mapper's newest map before its first frame.
+const RESUME_MAP_WAIT: std::time::Duration = std::time::Duration::from_secs(2);
+
+/// A restarted tracker's map: the newest map target, which the mapper hands to new
+/// subscribers (service history); none when there is no mapper or it has no map yet.
+fn wait_for_map(
+    map_target: &Inlet<MapTargetHeader>,
+) -> anyhow::Result<Option<(u64, MapGaussians)>> {
+    let started = std::time::Instant::now();
+    while started.elapsed() < RESUME_MAP_WAIT {
+        if let (Some(sample), _) = map_target.receive_newest()? {
+            let h = sample.user_header();
+            match h.decode(sample.payload()) {
+                Ok(view) => {
+                    return Ok(Some((
+                        h.stamp.seq,
+                        MapGaussians {
+                            means: view.means.to_vec(),
+                            rotations: view.rotations.to_vec(),
+                            scales: view.scales.to_vec(),
+                        },
+                    )))
+                }
+                Err(e) => tracing::error!("map target v{} rejected: {e}", h.map_version),
+            }
+        }
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    tracing::warn!(
+        "restarted: no map within {} s; going on with a model of its own",
+        RESUME_MAP_WAIT.as_secs()
+    );
+    Ok(None)
+}
+
 /// Runs the tracker stage until a termination signal.
 pub fn run_tracker(ctx: &RunContext, args: &TrackerArgs) -> anyhow::Result<()> {
     let node = ctx.node("tracker")?;
     let frames = Inlet::<FrameHeader>::new(ctx, &node, &FRAMES)?;
     let map_target = Inlet::<MapTargetHeader>::new(ctx, &node, &MAP_TARGET)?;
+    let resume = match &args.resume {
+        Some(path) => {
+            let poses = opengs_eval::read_tum_trajectory(path)?;
+            let last = poses
+                .last()
+                .ok_or_else(|| anyhow::anyhow!("--resume {}: no poses", path.display()))?;
+            let (pose, time) = (last.pose, last.timestamp);
+            Some((pose, time, poses.into_iter().map(|p| p.pose).collect()))
+        }
+        None => None,
+    };
     let mut stage = TrackerStage {
         tracker: None,
+        resume,
+        early_map: None,
         pool: rayon::ThreadPoolBuilder::new()
             .num_threads(args.threads.max(1))
             .build()?,
@@ -231,6 +314,12 @@ pub fn run_tracker(ctx: &RunContext, args: &TrackerArgs) -> anyhow::Result<()> {
     let _guard = ws
         .attach_notification(frames.listener())
         .map_err(|e| anyhow::anyhow!("WaitSet: {e:?}"))?;
+    let _heartbeat = ws
+        .attach_interval(HEARTBEAT)
+        .map_err(|e| anyhow::anyhow!("WaitSet: {e:?}"))?;
+    if stage.resume.is_some() {
+        stage.early_map = wait_for_map(&map_target)?;
+    }
     stage.telemetry.ready();
     loop {
         match ws.wait_and_process_once(|_| CallbackProgression::Continue) {
@@ -238,6 +327,7 @@ pub fn run_tracker(ctx: &RunContext, args: &TrackerArgs) -> anyhow::Result<()> {
             Err(e) => anyhow::bail!("WaitSet: {e:?}"),
             Ok(_) => {}
         }
+        stage.telemetry.alive();
         map_target.clear_wakeups();
         // Only the newest map matters.
         if let (Some(sample), _) = map_target.receive_newest()? {

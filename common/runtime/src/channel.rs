@@ -114,6 +114,15 @@ impl<H: Debug + Default + ZeroCopySend + Stamped + Copy + 'static> Outlet<H> {
     pub fn send_header(&self, header: H) -> Result<(), RuntimeError> {
         self.send(header, |_, _| Ok(()))
     }
+
+    /// Connects subscribers that appeared since the last send and hands them the service's
+    /// history (a restarted stage gets the newest message without waiting for the next).
+    pub fn update_connections(&self) -> Result<(), RuntimeError> {
+        use iceoryx2::port::update_connections::UpdateConnections;
+        self.publisher
+            .update_connections()
+            .map_err(|e| RuntimeError::Iceoryx(format!("update connections: {e:?}")))
+    }
 }
 
 /// A received message: header plus payload, both in shared memory.

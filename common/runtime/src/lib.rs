@@ -13,7 +13,7 @@ pub use channel::{Inlet, Outlet, Received};
 pub use context::{leftover_files, RunContext};
 pub use error::RuntimeError;
 pub use signals::{finish_requested_flag, FINISH_SIGNAL, STOP_SIGNAL};
-pub use telemetry_sink::TelemetrySink;
+pub use telemetry_sink::{TelemetrySink, HEARTBEAT};
 
 pub use iceoryx2;
 pub use iceoryx2::prelude::{CallbackProgression, WaitSetAttachmentId};

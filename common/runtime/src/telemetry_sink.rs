@@ -1,13 +1,20 @@
+use std::cell::Cell;
+use std::time::{Duration, Instant};
+
 use iceoryx2::prelude::Node;
 use opengs_ipc_schema::service::TELEMETRY;
 use opengs_ipc_schema::{now_ns, MessageKind, Stamp, TelemetryEvent, TelemetryHeader};
 
 use crate::{Ipc, Outlet, RunContext, RuntimeError};
 
+/// How often an otherwise silent stage says it is alive; stage loops wake at least this often.
+pub const HEARTBEAT: Duration = Duration::from_millis(250);
+
 /// A stage's telemetry publisher: lifecycle events and per-message timings.
 pub struct TelemetrySink {
     outlet: Outlet<TelemetryHeader>,
     stage: String,
+    last_sent: Cell<Instant>,
 }
 
 impl TelemetrySink {
@@ -15,6 +22,7 @@ impl TelemetrySink {
         Ok(Self {
             outlet: Outlet::new(ctx, node, &TELEMETRY, 8)?,
             stage: stage.to_string(),
+            last_sent: Cell::new(Instant::now()),
         })
     }
 
@@ -31,9 +39,23 @@ impl TelemetrySink {
     }
 
     fn publish(&self, header: TelemetryHeader) {
+        self.last_sent.set(Instant::now());
         // Telemetry must never take a stage down: log and go on.
         if let Err(e) = self.outlet.send_header(header) {
             tracing::warn!("telemetry from {}: {e}", self.stage);
+        }
+    }
+
+    /// A heartbeat, when nothing was sent for [`HEARTBEAT`]; call it every loop iteration.
+    pub fn alive(&self) {
+        if self.last_sent.get().elapsed() >= HEARTBEAT {
+            let now = now_ns();
+            self.send(
+                TelemetryEvent::Heartbeat,
+                &Stamp::new(MessageKind::Telemetry, 0, 0, now),
+                now,
+                now,
+            );
         }
     }
 

@@ -157,6 +157,10 @@ pub struct FrameTracker {
     lost: Option<LostSpell>,
     /// Time of the previous frame (s).
     last_timestamp: f64,
+    /// A restarted tracker's last published pose and its time, for its first frame.
+    resume: Option<(Pose, f64)>,
+    /// Whether a map was handed over (a model is coming from the builder).
+    map_given: bool,
 }
 
 /// What a registration is for: its stages, iteration cap and checks.
@@ -201,7 +205,19 @@ impl FrameTracker {
             keyframe_poses: Vec::new(),
             lost: None,
             last_timestamp: f64::NAN,
+            resume: None,
+            map_given: false,
         }
+    }
+
+    /// A restarted tracker goes on from its predecessor's last published `pose` at
+    /// `timestamp` (s), never from the identity: its first frame is registered against the
+    /// map (given with [`Self::set_map`] before it) from there, with the wide search the gap
+    /// calls for; if that fails, relocalisation tries the earlier `keyframe_poses`. Without a
+    /// map, the first frame starts a new model at that pose.
+    pub fn resume_from(&mut self, pose: Pose, timestamp: f64, keyframe_poses: Vec<Pose>) {
+        self.resume = Some((pose, timestamp));
+        self.keyframe_poses = keyframe_poses;
     }
 
     pub fn config(&self) -> &TrackerConfig {
@@ -232,6 +248,7 @@ impl FrameTracker {
     /// includes them is used from the frame after it is built.
     pub fn set_map(&mut self, seq: u64, gaussians: MapGaussians) {
         let regularization = self.config.regularization;
+        self.map_given = true;
         self.builder.set_map(seq, gaussians, regularization);
     }
 
@@ -287,6 +304,19 @@ impl FrameTracker {
             Ok(c) => c,
             Err(e) => return self.without_depth(&e, updates),
         };
+        if let Some((pose, timestamp)) = self.resume.take() {
+            if self.model.is_none() && self.map_given {
+                let first = self.builder.wait();
+                updates.extend(self.install(first));
+            }
+            if self.model.is_some() {
+                self.motion.update(pose, timestamp);
+                self.last_timestamp = timestamp;
+                self.keyframe_poses.push(pose);
+            } else {
+                self.first_pose = pose;
+            }
+        }
         if self.motion.last().is_none() {
             self.last_timestamp = frame.timestamp;
             return self.start(index, frame.timestamp, cloud, updates);

@@ -102,3 +102,67 @@ fn frames_without_depth_are_lost_and_the_next_is_tracked_across_the_gap() {
         "{offset:?} vs {gt_offset:?}"
     );
 }
+
+/// A restarted tracker (issue: it started again from the identity) goes on from the last
+/// published pose: registered against the map of what the first one saw, across the frames
+/// the restart missed, it stays on the ground truth; a fresh start would be off by the whole
+/// distance from the origin.
+#[test]
+fn a_resumed_tracker_continues_from_the_last_pose_against_the_map() {
+    let mut spec: DatasetSpec = "synthetic".parse().expect("spec");
+    spec.synthetic.trajectory = Some(fr1_xyz());
+    spec.synthetic.frames = Some(90);
+    let mut source = open_dataset(&spec).expect("dataset");
+    let k = source.intrinsics();
+    let gt = |f: &opengs_datasets::RgbdFrame| f.gt_pose.expect("synthetic has ground truth");
+    let mut first = FrameTracker::new(TrackerConfig::tum());
+    let f0 = source.frame(0).expect("frame");
+    first.set_first_pose(gt(&f0));
+    let mut map = opengs_tracking::MapGaussians {
+        means: Vec::new(),
+        rotations: Vec::new(),
+        scales: Vec::new(),
+    };
+    let mut last = None;
+    for i in 0..45 {
+        let f = source.frame(i).expect("frame");
+        let out = first.track(&depth_frame(&f.depth, &f, &k));
+        if let Some(cloud) = out.world_cloud() {
+            map.means.extend(&cloud.points);
+            map.rotations.extend(std::iter::repeat_n(
+                [1.0, 0.0, 0.0, 0.0],
+                cloud.points.len(),
+            ));
+            map.scales
+                .extend(std::iter::repeat_n([0.01; 3], cloud.points.len()));
+        }
+        last = Some((out.pose, f.timestamp));
+    }
+    let (pose, t) = last.expect("tracked");
+    // Frames 45..54 fall into the restart; the new tracker sees 55 first.
+    let mut resumed = FrameTracker::new(TrackerConfig::tum());
+    resumed.set_map(44, map);
+    resumed.resume_from(pose, t, Vec::new());
+    let mut fresh = FrameTracker::new(TrackerConfig::tum());
+    let mut worst: f64 = 0.0;
+    let mut moved: f64 = 0.0;
+    for i in 55..90 {
+        let f = source.frame(i).expect("frame");
+        let out = resumed.track(&depth_frame(&f.depth, &f, &k));
+        assert!(out.status.has_pose(), "frame {i}: {:?}", out.status);
+        worst = worst.max((out.pose.translation.vector - gt(&f).translation.vector).norm());
+        let fresh_out = fresh.track(&depth_frame(&f.depth, &f, &k));
+        moved = moved.max((fresh_out.pose.translation.vector - gt(&f).translation.vector).norm());
+    }
+    eprintln!(
+        "resumed: worst error {:.2} cm; fresh start: {:.1} cm",
+        worst * 100.0,
+        moved * 100.0
+    );
+    assert!(worst < 0.01, "resumed worst error {:.2} cm", worst * 100.0);
+    assert!(
+        moved > 0.5,
+        "a fresh start is far off ({:.1} cm)",
+        moved * 100.0
+    );
+}

@@ -11,7 +11,7 @@ use opengs_e2e::frame_checksum;
 use opengs_ipc_schema::service::{FRAMES, SEGMENTS};
 use opengs_ipc_schema::{now_ns, FrameHeader, SegmentsHeader};
 use opengs_runtime::{
-    waitset, CallbackProgression, Inlet, RunContext, TelemetrySink, WaitSetRunResult,
+    waitset, CallbackProgression, Inlet, RunContext, TelemetrySink, WaitSetRunResult, HEARTBEAT,
 };
 
 #[derive(Parser)]
@@ -38,6 +38,10 @@ fn watch_segments(
     let _g = ws
         .attach_notification(segments.listener())
         .map_err(|e| anyhow::anyhow!("{e:?}"))?;
+    // Wakes at least once per heartbeat, so the supervisor's watchdog hears from it.
+    let _tick = ws
+        .attach_interval(HEARTBEAT)
+        .map_err(|e| anyhow::anyhow!("{e:?}"))?;
     let stdout = std::io::stdout();
     let mut out = stdout.lock();
     writeln!(out, "ready")?;
@@ -49,6 +53,7 @@ fn watch_segments(
             Err(e) => anyhow::bail!("{e:?}"),
             Ok(_) => {}
         }
+        telemetry.alive();
         segments.clear_wakeups();
         while let Some(sample) = segments.receive()? {
             let now = now_ns();
@@ -83,6 +88,10 @@ fn run(args: Args) -> anyhow::Result<()> {
     let _g = ws
         .attach_notification(frames.listener())
         .map_err(|e| anyhow::anyhow!("{e:?}"))?;
+    // Wakes at least once per heartbeat, so the supervisor's watchdog hears from it.
+    let _tick = ws
+        .attach_interval(HEARTBEAT)
+        .map_err(|e| anyhow::anyhow!("{e:?}"))?;
     let stdout = std::io::stdout();
     let mut out = stdout.lock();
     writeln!(out, "ready")?;
@@ -95,6 +104,7 @@ fn run(args: Args) -> anyhow::Result<()> {
             Err(e) => anyhow::bail!("{e:?}"),
             Ok(_) => {}
         }
+        telemetry.alive();
         frames.clear_wakeups();
         while let Some(sample) = frames.receive()? {
             let start = now_ns();
