@@ -61,6 +61,12 @@ impl SegmenterKind {
         if options.proposals.is_some() && *self != Self::MobileSamV2 {
             return Err(self.unavailable("box proposals (--proposals) are for mobilesamv2"));
         }
+        if options.proposals.is_none() && *self == Self::MobileSamV2 {
+            // Without its object-aware boxes it would be SAM's grid under another name.
+            return Err(self.unavailable(
+                "needs its object-aware box model (--proposals); without it, run sam",
+            ));
+        }
         let segmenter: Box<dyn Segmenter> = match self {
             Self::Classic => Box::new(ClassicSegmenter::new(options.classic)?),
             Self::Prior => Box::new(PriorSegmenter::new()),
@@ -107,7 +113,10 @@ impl SegmenterKind {
         let mut segmenter = crate::sam::SamSegmenter::new(
             *self,
             paths,
-            crate::sam::AmgParams::default(),
+            crate::sam::AmgParams {
+                points_per_side: options.points_per_side,
+                ..crate::sam::AmgParams::default()
+            },
             options.threads,
         )?;
         if let Some(proposals) = &options.proposals {

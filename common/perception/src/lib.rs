@@ -34,7 +34,9 @@ pub use classic::{ClassicParams, ClassicSegmenter, EdgeWeights};
 pub use error::PerceptionError;
 pub use geometry::{GeometryParams, GeometrySegmenter};
 pub use kind::SegmenterKind;
-pub use model_paths::{EnsembleModelPaths, SamModelPaths, SegmenterOptions};
+pub use model_paths::{
+    EnsembleModelPaths, SamModelPaths, SegmenterOptions, DEFAULT_POINTS_PER_SIDE,
+};
 pub use prior::PriorSegmenter;
 pub use segmentation::{SegmentInfo, Segmentation};
 pub use segmenter::{Segmenter, SegmenterInput};

@@ -38,8 +38,12 @@ impl EnsembleModelPaths {
     }
 }
 
+/// SAM's prompt grid on a CPU: 16² = 256 decoder runs, a quarter of SAM's 32², since every
+/// real decoder run costs milliseconds and objects wider than 1/16 of the frame still get one.
+pub const DEFAULT_POINTS_PER_SIDE: u32 = 16;
+
 /// Everything needed to build any segmenter kind.
-#[derive(Debug, Clone, PartialEq, Default)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct SegmenterOptions {
     pub classic: crate::ClassicParams,
     pub geometry: crate::GeometryParams,
@@ -53,4 +57,20 @@ pub struct SegmenterOptions {
     pub ensemble: EnsembleModelPaths,
     /// ONNX Runtime intra-op threads (0 = 1).
     pub threads: usize,
+    /// `sam`: prompts on an N × N point grid.
+    pub points_per_side: u32,
+}
+
+impl Default for SegmenterOptions {
+    fn default() -> Self {
+        Self {
+            classic: Default::default(),
+            geometry: Default::default(),
+            sam_models: None,
+            proposals: None,
+            ensemble: Default::default(),
+            threads: 0,
+            points_per_side: DEFAULT_POINTS_PER_SIDE,
+        }
+    }
 }

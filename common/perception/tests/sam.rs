@@ -11,7 +11,7 @@ use opengs_perception::sam::{AmgParams, SamSegmenter};
 use opengs_perception::{PerceptionError, Segmenter, SegmenterInput, SegmenterKind};
 
 mod support;
-use support::{runtime_available, sam_fixtures};
+use support::{fixture, runtime_available, sam_fixtures};
 
 /// 160×120 grey image with red, green and blue rectangles; instance ids 0..=3.
 fn test_image() -> (Vec<u8>, Vec<u16>, u32, u32) {
@@ -144,8 +144,20 @@ fn kind_factory_builds_model_runners_from_paths() {
         threads: 1,
         ..Default::default()
     };
-    let segmenter = SegmenterKind::MobileSamV2
+    let segmenter = SegmenterKind::Sam.create_with(&options).expect("build");
+    assert_eq!(segmenter.name(), "sam");
+    // MobileSAMv2 is its box prompts: without the proposal model it is refused, not SAM.
+    let err = SegmenterKind::MobileSamV2
         .create_with(&options)
+        .err()
+        .expect("no proposals");
+    assert!(err.to_string().contains("--proposals"), "{err}");
+    let with_boxes = opengs_perception::SegmenterOptions {
+        proposals: Some(fixture("tiny_proposals.onnx")),
+        ..options
+    };
+    let segmenter = SegmenterKind::MobileSamV2
+        .create_with(&with_boxes)
         .expect("build");
     assert_eq!(segmenter.name(), "mobilesamv2");
     let err = SegmenterKind::Sam.create().err().expect("no paths");

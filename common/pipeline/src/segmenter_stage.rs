@@ -32,6 +32,10 @@ pub struct SegmenterArgs {
     /// MobileSAMv2 box-proposal ONNX (YOLOv8 export): box prompts instead of a point grid.
     #[arg(long)]
     pub proposals: Option<PathBuf>,
+    /// sam: decoder prompts on an N×N point grid per keyframe (SAM's own default is 32).
+    #[arg(long, default_value_t = opengs_perception::DEFAULT_POINTS_PER_SIDE,
+          value_parser = clap::value_parser!(u32).range(1..=64))]
+    pub points_per_side: u32,
     /// Ensemble tagger ONNX (RAM/RAM++ export) proposing class names.
     #[arg(long)]
     pub tagger: Option<PathBuf>,
@@ -60,6 +64,7 @@ pub fn run_segmenter(ctx: &RunContext, args: &SegmenterArgs) -> anyhow::Result<(
             _ => None,
         },
         proposals: args.proposals.clone(),
+        points_per_side: args.points_per_side,
         ensemble: opengs_perception::EnsembleModelPaths {
             tagger: args.tagger.clone(),
             tag_list: args.tag_list.clone(),

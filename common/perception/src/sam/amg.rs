@@ -40,32 +40,12 @@ pub struct AmgParams {
     pub seed: u64,
 }
 
-/// Grid density used by [`AmgParams::default`]: 16² = 256 decoder runs, a
-/// quarter of SAM's 32², since on a CPU every real decoder run costs
-/// milliseconds and objects wider than 1/16 of the frame still get a prompt.
-pub const DEFAULT_POINTS_PER_SIDE: u32 = 16;
-
-/// Environment variable that overrides [`DEFAULT_POINTS_PER_SIDE`] (1..=64):
-/// the segmenter stage's `--points-per-side` sets it, because the stage
-/// builds its segmenter from `SegmenterOptions`, which carry no AMG settings.
-pub const POINTS_PER_SIDE_ENV: &str = "OPENGS_SAM_POINTS_PER_SIDE";
-
-/// [`POINTS_PER_SIDE_ENV`] when set to a number in 1..=64, else the default.
-fn points_per_side_from_env() -> u32 {
-    points_per_side_from(std::env::var(POINTS_PER_SIDE_ENV).ok().as_deref())
-}
-
-fn points_per_side_from(value: Option<&str>) -> u32 {
-    value
-        .and_then(|v| v.trim().parse::<u32>().ok())
-        .filter(|n| (1..=64).contains(n))
-        .unwrap_or(DEFAULT_POINTS_PER_SIDE)
-}
+pub use crate::model_paths::DEFAULT_POINTS_PER_SIDE;
 
 impl Default for AmgParams {
     fn default() -> Self {
         Self {
-            points_per_side: points_per_side_from_env(),
+            points_per_side: DEFAULT_POINTS_PER_SIDE,
             pred_iou_thresh: 0.88,
             stability_score_thresh: 0.95,
             stability_offset: 1.0,
@@ -571,15 +551,6 @@ mod tests {
             g,
             vec![[24.5, 12.0], [74.5, 12.0], [24.5, 37.0], [74.5, 37.0]]
         );
-    }
-
-    #[test]
-    fn grid_density_from_the_environment() {
-        assert_eq!(points_per_side_from(None), 16);
-        assert_eq!(points_per_side_from(Some(" 24 ")), 24);
-        assert_eq!(points_per_side_from(Some("0")), 16, "out of 1..=64");
-        assert_eq!(points_per_side_from(Some("65")), 16, "out of 1..=64");
-        assert_eq!(points_per_side_from(Some("dense")), 16);
     }
 
     #[test]

@@ -25,7 +25,7 @@ pub(crate) mod runtime;
 
 pub use amg::{
     AmgParams, LowResFrame, MaskGenerator, Survivor, DEFAULT_POINTS_PER_SIDE,
-    EXACT_STABILITY_MARGIN, LOW_RES_SIDE, POINTS_PER_SIDE_ENV,
+    EXACT_STABILITY_MARGIN, LOW_RES_SIDE,
 };
 pub use proposals::BoxProposer;
 
