@@ -128,3 +128,59 @@ fn killed_and_hung_stages_cost_seconds_not_the_run() {
     let verified = got["frames"].as_u64().unwrap_or(0) - got["frames_lost"].as_u64().unwrap_or(0);
     assert!(verified >= 60, "{verified} verified poses: {got}");
 }
+
+/// The supervisor itself SIGKILLed mid-run (before: no trajectory.txt, run.json or latency,
+/// 77 poses lost): its snapshots leave a directory `opengs eval` scores.
+#[test]
+fn a_killed_supervisor_leaves_a_usable_run_directory() {
+    let _serial = serial();
+    let dir = tempfile::tempdir().expect("tmp");
+    let out = dir.path().join("run");
+    let run_id = format!("t{}-supkill", std::process::id());
+    let child = opengs_run(&run_id, &out)
+        .args(["--frames", "300", "--finish-steps", "0"])
+        .spawn()
+        .expect("run starts");
+    let mut guard = Guard(child);
+    let deadline = Instant::now() + Duration::from_secs(60);
+    wait_poses(&run_id, 80, deadline);
+    // A snapshot is at most 5 s old; wait for one that has poses in it.
+    while !std::fs::read_to_string(out.join("trajectory.txt")).is_ok_and(|t| t.lines().count() > 20)
+    {
+        assert!(Instant::now() < deadline, "no snapshot of the trajectory");
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    let _ = guard.0.kill();
+    let _ = guard.0.wait();
+    let trajectory = std::fs::read_to_string(out.join("trajectory.txt")).expect("trajectory");
+    let poses = trajectory.lines().filter(|l| !l.starts_with('#')).count();
+    let record: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("run.json")).expect("run.json"))
+            .expect("run.json parses");
+    assert_eq!(record["run_id"], run_id.as_str());
+    let latency: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(out.join("latency.json")).expect("latency.json"),
+    )
+    .expect("latency.json parses");
+    assert!(latency["stages"]["tracker"]["count"].as_u64().unwrap_or(0) > 0);
+    let eval = Command::new(opengs_e2e::binary("opengs"))
+        .arg("eval")
+        .arg(&out)
+        .output()
+        .expect("opengs eval");
+    assert!(
+        eval.status.success(),
+        "{}",
+        String::from_utf8_lossy(&eval.stderr)
+    );
+    let scored = metrics(&out);
+    eprintln!(
+        "killed supervisor: {poses} poses kept, ATE {:.3} cm",
+        scored["ate_rmse_cm"].as_f64().unwrap_or(f64::NAN)
+    );
+    assert!(poses > 20);
+    assert!(
+        scored["ate_rmse_cm"].as_f64().is_some_and(|a| a < 1.0),
+        "{scored}"
+    );
+}

@@ -11,7 +11,7 @@ pub use ate::{
     DEFAULT_MAX_TIME_DIFFERENCE,
 };
 pub use label_png::{read_label_png, write_label_png};
-pub use run_dir::RunDir;
+pub use run_dir::{write_atomically, RunDir};
 pub use segmentation::{InstanceScore, LabelConfusion, SegmentationScore};
 pub use trajectory::{
     format_tum_trajectory, parse_tum_trajectory, read_tum_trajectory, write_tum_trajectory,

@@ -92,9 +92,11 @@ pub fn format_tum_trajectory(poses: &[TimedPose]) -> String {
 }
 
 pub fn write_tum_trajectory(path: &Path, poses: &[TimedPose]) -> Result<(), TrajectoryError> {
-    std::fs::write(path, format_tum_trajectory(poses)).map_err(|error| TrajectoryError::Io {
-        path: path.to_path_buf(),
-        error,
+    crate::write_atomically(path, format_tum_trajectory(poses).as_bytes()).map_err(|error| {
+        TrajectoryError::Io {
+            path: path.to_path_buf(),
+            error,
+        }
     })
 }
 

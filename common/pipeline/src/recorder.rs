@@ -117,9 +117,11 @@ impl Recorder {
         for (seq, f) in self.frames.iter().filter(|(_, f)| !f.status.has_pose()) {
             lost.push_str(&format!("{:.6} {seq} {:?}\n", f.timestamp, f.status));
         }
-        std::fs::write(&lost_path, lost).map_err(|error| TrajectoryError::Io {
-            path: lost_path,
-            error,
+        opengs_eval::write_atomically(&lost_path, lost.as_bytes()).map_err(|error| {
+            TrajectoryError::Io {
+                path: lost_path,
+                error,
+            }
         })?;
         let gt: Vec<TimedPose> = self
             .frames

@@ -36,7 +36,8 @@ impl RunRecord {
     pub fn write(&self, run: &RunDir) -> anyhow::Result<()> {
         let path = run.run_record();
         let text = serde_json::to_string_pretty(self)?;
-        std::fs::write(&path, text).with_context(|| format!("writing {}", path.display()))
+        opengs_eval::write_atomically(&path, text.as_bytes())
+            .with_context(|| format!("writing {}", path.display()))
     }
 
     /// `Ok(None)` when the run has no `run.json`.

@@ -144,17 +144,7 @@ impl Supervisor {
                 leftover_files
             );
         }
-        let stages = state
-            .stages
-            .iter()
-            .map(|s| StageRecord {
-                name: s.spec.name.clone(),
-                restarts: s.restarts,
-                hangs: s.hangs,
-                processed: s.processed,
-                last_seq: s.last_seq,
-            })
-            .collect();
+        let stages = state.stage_records();
         Ok(Supervised {
             ending,
             streaming_s: streaming_s.unwrap_or_else(|| started.elapsed().as_secs_f64()),
@@ -184,7 +174,15 @@ struct RunState {
     dataset_args: Vec<String>,
     log_dir: PathBuf,
     swap: Option<Swap>,
+    /// The dataset selection, for the run record the snapshots write.
+    dataset: crate::DatasetArgs,
+    last_snapshot: Instant,
 }
+
+/// How often the run's files are rewritten while it runs, so a supervisor killed outright
+/// (SIGKILL, power) leaves a usable run directory: trajectory, lost frames, ground truth,
+/// latency profile, run record.
+const SNAPSHOT_EVERY: Duration = Duration::from_secs(5);
 
 impl RunState {
     fn new(opts: &RunOptions, log_dir: PathBuf) -> Self {
@@ -219,6 +217,8 @@ impl RunState {
             dataset_args: opts.dataset.to_args(),
             log_dir,
             swap: None,
+            dataset: opts.dataset.clone(),
+            last_snapshot: Instant::now(),
         }
     }
 
@@ -259,6 +259,46 @@ impl RunState {
         }
         a.extend(self.stage_flags.for_stage(&s.spec.name));
         a
+    }
+
+    /// The run's files as of now (atomic rewrites); the end of the run writes them again.
+    fn snapshot(&mut self) {
+        self.last_snapshot = Instant::now();
+        let run = RunDir::new(&self.out_dir);
+        let written = (|| -> anyhow::Result<()> {
+            if !self.recorder.is_empty() {
+                self.recorder.write(&self.out_dir)?;
+            }
+            let latency = serde_json::to_string_pretty(&self.profile.report())?;
+            opengs_eval::write_atomically(&run.latency(), latency.as_bytes())?;
+            self.record().write(&run)
+        })();
+        if let Err(e) = written {
+            tracing::warn!("run snapshot: {e:#}");
+        }
+    }
+
+    /// The run record as of now.
+    fn record(&self) -> crate::RunRecord {
+        crate::RunRecord {
+            run_id: self.run_id.clone(),
+            dataset_args: self.dataset.clone(),
+            frames_total: self.total_frames,
+            stages: self.stage_records(),
+        }
+    }
+
+    fn stage_records(&self) -> Vec<StageRecord> {
+        self.stages
+            .iter()
+            .map(|s| StageRecord {
+                name: s.spec.name.clone(),
+                restarts: s.restarts,
+                hangs: s.hangs,
+                processed: s.processed,
+                last_seq: s.last_seq,
+            })
+            .collect()
     }
 
     fn stage_index(&self, name: &str) -> Option<usize> {
@@ -329,6 +369,8 @@ impl RunState {
         let _tick = ws
             .attach_interval(Duration::from_millis(100))
             .map_err(err)?;
+        // run.json from the start: a killed supervisor's directory says what the run was.
+        self.snapshot();
         loop {
             if self.wait_for_news(&ws)? {
                 return Ok(Ending::Interrupted);
@@ -344,6 +386,9 @@ impl RunState {
             }
             if let Some(p) = &mut self.progress {
                 p.update(&self.stages, self.recorder.len(), started);
+            }
+            if self.last_snapshot.elapsed() >= SNAPSHOT_EVERY {
+                self.snapshot();
             }
             if let Some((last_seq, at)) = self.end_of_data {
                 let terminal_done = match &self.deploy.terminal_stage {
