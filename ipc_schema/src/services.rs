@@ -32,8 +32,10 @@ const fn spec(
 pub const FRAMES: ServiceSpec = spec("frames", 2, 8, 0);
 pub const POSES: ServiceSpec = spec("poses", 2, 64, 0);
 pub const KEYFRAMES: ServiceSpec = spec("keyframes", 2, 16, 0);
-pub const SEGMENTS: ServiceSpec = spec("segments", 3, 8, 0);
-pub const RENDERS: ServiceSpec = spec("renders", 2, 8, 0);
+/// History serves a restarted consensus (or mapper) the segmentations and the render it was
+/// waiting for, so the keyframe in flight is answered instead of timing out.
+pub const SEGMENTS: ServiceSpec = spec("segments", 3, 8, 4);
+pub const RENDERS: ServiceSpec = spec("renders", 2, 8, 2);
 pub const CONSENSUS: ServiceSpec = spec("consensus", 2, 16, 0);
 /// The newest map target is all the tracker needs; history 1 serves a restarted tracker.
 pub const MAP_TARGET: ServiceSpec = spec("map_target", 2, 2, 1);

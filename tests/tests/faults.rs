@@ -1,10 +1,10 @@
 //! A stage that dies or hangs costs seconds, never the run: the quick fault campaign on the
-//! built-in room (120 frames, no final optimisation). One fault-free run, then one run in
-//! which the mapper and then the tracker are SIGKILLed and the tracker is SIGSTOPped (only the
-//! watchdog can tell). The faulted run must finish with its trajectory, map and labels close
-//! to the fault-free run's.
+//! built-in room (120 frames, no final optimisation). One fault-free run; one in which the
+//! mapper and then the consensus are SIGKILLed; one in which the tracker is SIGKILLed and
+//! then SIGSTOPped (only the watchdog can tell). Each faulted run must finish with its
+//! trajectory, map and labels close to the fault-free run's.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::{Duration, Instant};
 
@@ -35,15 +35,82 @@ fn signal(run_id: &str, stage: &str, sig: i32) {
     assert_eq!(unsafe { libc::kill(pid, sig) }, 0, "kill {stage}");
 }
 
+/// One fault-injected run: `faults` (poses to wait for, stage, signal) in order. Returns the
+/// run's directory once it ended (exit 0 and its stderr checked by the caller).
+fn faulted_run(dir: &Path, tag: &str, faults: &[(u64, &str, i32)]) -> (PathBuf, String) {
+    let out = dir.join(tag);
+    let run_id = format!("t{}-{tag}", std::process::id());
+    let child = opengs_run(&run_id, &out)
+        .args(RUN_ARGS)
+        .spawn()
+        .expect("run starts");
+    let mut guard = Guard(child);
+    let deadline = Instant::now() + Duration::from_secs(120);
+    for &(at, stage, sig) in faults {
+        wait_poses(&run_id, at, deadline);
+        signal(&run_id, stage, sig);
+    }
+    let running = std::mem::replace(&mut guard.0, Command::new("true").spawn().expect("true"));
+    let output = running.wait_with_output().expect("run ends");
+    let stderr = String::from_utf8_lossy(&output.stderr).into_owned();
+    assert!(output.status.success(), "{tag}: {stderr}");
+    (out, stderr)
+}
+
+fn stage_record(out: &Path, name: &str) -> serde_json::Value {
+    let record: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("run.json")).expect("run.json"))
+            .expect("json");
+    record["stages"]
+        .as_array()
+        .and_then(|a| a.iter().find(|s| s["name"] == name))
+        .cloned()
+        .expect(name)
+}
+
+/// Trajectory, map and labels within the issue's bounds of the fault-free run: ATE 2x (or
+/// +0.1 cm: sub-millimetre baselines make a bare 2x meaningless), PSNR 2 dB, mIoU 5 points.
+fn close_to(base: &serde_json::Value, got: &serde_json::Value, tag: &str) {
+    let num = |m: &serde_json::Value, k: &str| m[k].as_f64().unwrap_or(f64::NAN);
+    eprintln!(
+        "{tag}: ATE {:.3} cm, PSNR {:.2} dB, mIoU {:.1}, {} poses ({} lost); fault-free: ATE \
+         {:.3} cm, PSNR {:.2} dB, mIoU {:.1}",
+        num(got, "ate_rmse_cm"),
+        num(got, "psnr_db"),
+        num(got, "miou"),
+        got["frames"],
+        got["frames_lost"],
+        num(base, "ate_rmse_cm"),
+        num(base, "psnr_db"),
+        num(base, "miou"),
+    );
+    let ate_limit = (2.0 * num(base, "ate_rmse_cm")).max(num(base, "ate_rmse_cm") + 0.1);
+    assert!(num(got, "ate_rmse_cm") <= ate_limit, "{tag}: ATE {got}");
+    assert!(
+        num(got, "psnr_db") >= num(base, "psnr_db") - 2.0,
+        "{tag}: PSNR {got}"
+    );
+    assert!(
+        num(got, "miou") >= num(base, "miou") - 5.0,
+        "{tag}: mIoU {got}"
+    );
+    // A hang costs the watchdog's second and the restart, and the camera moves on meanwhile:
+    // where it moved too far to be found from the last pose or a keyframe's, the tracker
+    // stays lost until it comes back (global relocalisation is not built). At least half of
+    // the frames keep a verified pose.
+    let verified = got["frames"].as_u64().unwrap_or(0) - got["frames_lost"].as_u64().unwrap_or(0);
+    assert!(verified >= 60, "{tag}: {verified} verified poses: {got}");
+}
+
+const RUN_ARGS: [&str; 4] = ["--frames", "120", "--finish-steps", "0"];
+
 #[test]
 fn killed_and_hung_stages_cost_seconds_not_the_run() {
     let _serial = serial();
     let dir = tempfile::tempdir().expect("tmp");
-    let args = ["--frames", "120", "--finish-steps", "0"];
-
     let clean = dir.path().join("clean");
     let run = opengs_run(&format!("t{}-clean", std::process::id()), &clean)
-        .args(args)
+        .args(RUN_ARGS)
         .output()
         .expect("run");
     assert!(
@@ -53,80 +120,50 @@ fn killed_and_hung_stages_cost_seconds_not_the_run() {
     );
     let base = metrics(&clean);
 
-    let out = dir.path().join("faults");
-    let run_id = format!("t{}-faults", std::process::id());
-    let child = opengs_run(&run_id, &out)
-        .args(args)
-        .spawn()
-        .expect("run starts");
-    let mut guard = Guard(child);
-    let deadline = Instant::now() + Duration::from_secs(120);
-    // Mid-run: the mapper (checkpointed at its first keyframe and within a second of each
-    // keyframe and consensus since), then the tracker, then the tracker again by a hang.
-    wait_poses(&run_id, 30, deadline);
-    assert!(
-        out.join("map_checkpoint.ply").exists(),
-        "no checkpoint by 30 frames"
+    // The map's side: the mapper (checkpointed at its first keyframe and within a second of
+    // each keyframe and consensus since), then the consensus. Before: a mapper killed before
+    // its first checkpoint came back empty (PSNR 12.7 dB); a restarted consensus skipped
+    // keyframes without a word.
+    let (out, _) = faulted_run(
+        dir.path(),
+        "map",
+        &[
+            (30, "mapper", libc::SIGKILL),
+            (60, "consensus", libc::SIGKILL),
+        ],
     );
-    signal(&run_id, "mapper", libc::SIGKILL);
-    wait_poses(&run_id, 55, deadline);
-    signal(&run_id, "tracker", libc::SIGKILL);
-    wait_poses(&run_id, 85, deadline);
-    signal(&run_id, "tracker", libc::SIGSTOP);
-    let running = std::mem::replace(&mut guard.0, Command::new("true").spawn().expect("true"));
-    let output = running.wait_with_output().expect("run ends");
-    let stderr = String::from_utf8_lossy(&output.stderr);
-    assert!(output.status.success(), "{stderr}");
-    assert!(stderr.contains("hung or stopped; killing it"), "{stderr}");
-
-    let record: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("run.json")).expect("run.json"))
-            .expect("json");
-    let stage = |name: &str| {
-        record["stages"]
-            .as_array()
-            .and_then(|a| a.iter().find(|s| s["name"] == name))
-            .cloned()
-            .expect(name)
-    };
-    assert_eq!(stage("tracker")["restarts"], 2, "{record}");
-    assert_eq!(stage("tracker")["hangs"], 1, "{record}");
-    assert_eq!(stage("mapper")["restarts"], 1, "{record}");
+    assert_eq!(stage_record(&out, "mapper")["restarts"], 1);
+    assert_eq!(stage_record(&out, "consensus")["restarts"], 1);
+    // No keyframe answered twice: service history hands the restarted consensus what its
+    // predecessor answered, and it skips those.
+    assert!(
+        stage_record(&out, "consensus")["processed"].as_u64()
+            <= stage_record(&out, "segmenter")["processed"].as_u64()
+    );
     // The restarted mapper counts the keyframes mapped before its death.
     let mapper: serde_json::Value = serde_json::from_str(
         &std::fs::read_to_string(out.join("mapper.json")).expect("mapper.json"),
     )
     .expect("json");
     assert_eq!(mapper["restarts"], 1, "{mapper}");
-    let got = metrics(&out);
-    let num = |m: &serde_json::Value, k: &str| m[k].as_f64().unwrap_or(f64::NAN);
-    eprintln!(
-        "fault-free: ATE {:.3} cm, PSNR {:.2} dB, mIoU {:.1}, {} poses; faulted: ATE {:.3} cm, \
-         PSNR {:.2} dB, mIoU {:.1}, {} poses, mapper keyframes {}",
-        num(&base, "ate_rmse_cm"),
-        num(&base, "psnr_db"),
-        num(&base, "miou"),
-        base["frames"],
-        num(&got, "ate_rmse_cm"),
-        num(&got, "psnr_db"),
-        num(&got, "miou"),
-        got["frames"],
-        mapper["keyframes"]
+    assert!(mapper["keyframes"].as_u64().unwrap_or(0) >= 8, "{mapper}");
+    close_to(&base, &metrics(&out), "mapper and consensus killed");
+
+    // The tracker: killed (before: it restarted at the identity, ATE 45.9 cm), then hung,
+    // which only the watchdog can tell.
+    let (out, stderr) = faulted_run(
+        dir.path(),
+        "track",
+        &[
+            (40, "tracker", libc::SIGKILL),
+            (80, "tracker", libc::SIGSTOP),
+        ],
     );
-    // Before: a restarted tracker began at the identity (ATE 45.9 cm) and a mapper killed
-    // before its first checkpoint came back empty (PSNR 12.7 dB). Sub-millimetre baselines
-    // make a bare 2x meaningless, so the ATE may also grow by 0.1 cm.
-    let ate_limit = (2.0 * num(&base, "ate_rmse_cm")).max(num(&base, "ate_rmse_cm") + 0.1);
-    assert!(num(&got, "ate_rmse_cm") <= ate_limit, "ATE {got}");
-    assert!(
-        num(&got, "psnr_db") >= num(&base, "psnr_db") - 2.0,
-        "PSNR {got}"
-    );
-    assert!(num(&got, "miou") >= num(&base, "miou") - 5.0, "mIoU {got}");
-    // Each fault costs seconds of frames (a hang: the watchdog's second, the restart, and
-    // frames lost until the camera is found again): at least half keep a verified pose.
-    let verified = got["frames"].as_u64().unwrap_or(0) - got["frames_lost"].as_u64().unwrap_or(0);
-    assert!(verified >= 60, "{verified} verified poses: {got}");
+    assert!(stderr.contains("hung or stopped; killing it"), "{stderr}");
+    let tracker = stage_record(&out, "tracker");
+    assert_eq!(tracker["restarts"], 2, "{tracker}");
+    assert_eq!(tracker["hangs"], 1, "{tracker}");
+    close_to(&base, &metrics(&out), "tracker killed and hung");
 }
 
 /// The supervisor itself SIGKILLed mid-run (before: no trajectory.txt, run.json or latency,

@@ -103,6 +103,12 @@ impl RunDir {
         self.file("label_table.json")
     }
 
+    /// The last keyframe the consensus answered (its seq), saved with the label table, so a
+    /// restarted consensus neither answers a keyframe twice nor skips one without saying so.
+    pub fn consensus_progress(&self) -> PathBuf {
+        self.file("consensus_progress.json")
+    }
+
     /// Global labels of the finished map (class, score, Gaussian count).
     pub fn labels(&self) -> PathBuf {
         self.file("labels.json")

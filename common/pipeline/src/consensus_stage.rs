@@ -142,6 +142,16 @@ struct ConsensusStage {
     telemetry: TelemetrySink,
     out_dir: PathBuf,
     save_pngs: bool,
+    /// Seq of the last keyframe answered (by this process or, restarted, its predecessor).
+    last_answered: Option<u64>,
+    /// Restarted: the first keyframe answered after the restart is still to be reported.
+    resumed: bool,
+}
+
+/// What `consensus_progress.json` keeps.
+#[derive(serde::Serialize, serde::Deserialize)]
+struct ConsensusProgress {
+    last_answered: u64,
 }
 
 impl ConsensusStage {
@@ -221,7 +231,26 @@ impl ConsensusStage {
             };
             self.segments.retain(|&s, _| s > seq);
             self.renders.retain(|&s, _| s > seq);
+            if self.last_answered.is_some_and(|last| seq <= last) {
+                // Service history hands a restarted consensus what its predecessor answered.
+                tracing::debug!("keyframe #{seq}: answered before the restart");
+                continue;
+            }
+            if std::mem::take(&mut self.resumed) {
+                tracing::warn!(
+                    "restarted: first keyframe answered #{seq}; the last before the restart was \
+                     #{}; keyframes between them that were segmented meanwhile got no consensus",
+                    self.last_answered
+                        .map_or("-".to_string(), |s| s.to_string())
+                );
+            }
             self.process(&seg, &render)?;
+            self.last_answered = Some(seq);
+            let progress = serde_json::to_vec(&ConsensusProgress { last_answered: seq })?;
+            let path = RunDir::new(&self.out_dir).consensus_progress();
+            if let Err(e) = opengs_eval::write_atomically(&path, &progress) {
+                tracing::error!("{}: {e}", path.display());
+            }
         }
         Ok(())
     }
@@ -373,6 +402,10 @@ pub fn run_consensus(ctx: &RunContext, out_dir: &Path, args: &ConsensusArgs) -> 
         }
         None => LabelConsensus::new(config)?,
     };
+    let resumed_from = std::fs::read(RunDir::new(out_dir).consensus_progress())
+        .ok()
+        .and_then(|bytes| serde_json::from_slice::<ConsensusProgress>(&bytes).ok())
+        .map(|p| p.last_answered);
     std::fs::create_dir_all(out_dir)?;
     if !args.no_segment_pngs {
         std::fs::create_dir_all(RunDir::new(out_dir).segments_dir())?;
@@ -388,6 +421,8 @@ pub fn run_consensus(ctx: &RunContext, out_dir: &Path, args: &ConsensusArgs) -> 
         telemetry: TelemetrySink::new(ctx, &node, "consensus")?,
         out_dir: out_dir.to_path_buf(),
         save_pngs: !args.no_segment_pngs,
+        last_answered: resumed_from,
+        resumed: resumed_from.is_some(),
     };
     let ws = waitset()?;
     let _g1 = ws

@@ -502,8 +502,14 @@ pub fn run_mapper(ctx: &RunContext, out_dir: &Path, args: &MapperArgs) -> anyhow
         stage.telemetry.alive();
         if last_connect.elapsed() >= HEARTBEAT {
             // A restarted tracker gets the newest map target now, not after the next keyframe.
-            if let Err(e) = stage.map_target.update_connections() {
-                tracing::debug!("{e}");
+            // ... and a restarted consensus the render it was to answer.
+            for connected in [
+                stage.map_target.update_connections(),
+                stage.renders.update_connections(),
+            ] {
+                if let Err(e) = connected {
+                    tracing::debug!("{e}");
+                }
             }
             last_connect = Instant::now();
         }

@@ -100,6 +100,10 @@ pub fn run_segmenter(ctx: &RunContext, args: &SegmenterArgs) -> anyhow::Result<(
             Ok(_) => {}
         }
         telemetry.alive();
+        // A restarted consensus or mapper gets the newest segmentations (service history).
+        if let Err(e) = segments.update_connections() {
+            tracing::debug!("{e}");
+        }
         keyframes.clear_wakeups();
         let (newest, skipped) = keyframes.receive_newest()?;
         let Some(sample) = newest else { continue };

@@ -85,10 +85,15 @@ impl Supervisor {
                 opts.out_dir.display()
             )
         })?;
-        // A new run starts from nothing: a mapper checkpoint an earlier run left in this
-        // directory would otherwise be "resumed" by the first restart.
+        // A new run starts from nothing: a mapper checkpoint or label table an earlier run
+        // left in this directory would otherwise be "resumed" by the first restart.
         let run_dir = RunDir::new(&opts.out_dir);
-        for stale in [run_dir.map_checkpoint(), run_dir.map_checkpoint_counters()] {
+        for stale in [
+            run_dir.map_checkpoint(),
+            run_dir.map_checkpoint_counters(),
+            run_dir.label_table(),
+            run_dir.consensus_progress(),
+        ] {
             if stale.exists() {
                 std::fs::remove_file(&stale).map_err(|e| {
                     anyhow::anyhow!("cannot remove an earlier run's {}: {e}", stale.display())
