@@ -221,3 +221,47 @@ fn a_killed_supervisor_leaves_a_usable_run_directory() {
         "{scored}"
     );
 }
+
+/// A corrupt frame is bad input, not a crash: the sensor stops on it (exit 65) and is not
+/// restarted (before: three restarts that read the same file, then exit 3); the run ends with
+/// exit 4 naming the file, and what came before it is kept.
+#[test]
+fn a_corrupt_frame_stops_the_run_naming_it() {
+    let _serial = serial();
+    let dir = tempfile::tempdir().expect("tmp");
+    let data = dir.path().join("tum");
+    let synth = Command::new(opengs_e2e::binary("opengs"))
+        .args(["synth", "--frames", "40", "--format", "tum", "--out"])
+        .arg(&data)
+        .output()
+        .expect("synth");
+    assert!(synth.status.success());
+    let mut depth: Vec<PathBuf> = std::fs::read_dir(data.join("depth"))
+        .expect("depth dir")
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .collect();
+    depth.sort();
+    let broken = &depth[25];
+    std::fs::write(broken, b"\x89PNG\r\n\x1a\n but not really").expect("break a frame");
+    let out = dir.path().join("run");
+    let run = opengs_run(&format!("t{}-corrupt", std::process::id()), &out)
+        .arg("--dataset")
+        .arg(format!("tum:{}", data.display()))
+        .args(["--finish-steps", "0"])
+        .output()
+        .expect("run");
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    assert_eq!(run.status.code(), Some(4), "{stderr}");
+    let name = broken.file_name().and_then(|n| n.to_str()).unwrap_or("?");
+    assert!(
+        stderr.contains("stopped on input it cannot use"),
+        "{stderr}"
+    );
+    assert!(stderr.contains(name), "names {name}: {stderr}");
+    assert!(!stderr.contains("restarted sensor"), "{stderr}");
+    let trajectory = std::fs::read_to_string(out.join("trajectory.txt")).expect("kept");
+    assert!(
+        trajectory.lines().filter(|l| !l.starts_with('#')).count() >= 20,
+        "{trajectory}"
+    );
+}

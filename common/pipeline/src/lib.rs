@@ -27,7 +27,7 @@ pub mod tracker_stage;
 
 pub use dataset_args::DatasetArgs;
 pub use deploy::{DeployFile, StageSpec};
-pub use run::{run, RunSummary, StageFailed};
+pub use run::{run, RunSummary, StageFailed, StoppedOnBadInput};
 pub use run_options::{RunOptions, StageFlags};
 pub use run_record::{RunRecord, StageRecord};
 pub use supervisor::{Supervised, Supervisor};

@@ -82,6 +82,10 @@ pub fn run(opts: RunOptions) -> anyhow::Result<RunSummary> {
             why,
             out_dir: opts.out_dir.clone(),
         })),
+        Ending::BadInput(why) => Err(anyhow::Error::new(StoppedOnBadInput {
+            why,
+            out_dir: opts.out_dir.clone(),
+        })),
         _ => Ok(summary),
     }
 }
@@ -90,6 +94,14 @@ pub fn run(opts: RunOptions) -> anyhow::Result<RunSummary> {
 #[derive(Debug, thiserror::Error)]
 #[error("{why}; outputs so far are in {}", out_dir.display())]
 pub struct StageFailed {
+    pub why: String,
+    pub out_dir: PathBuf,
+}
+
+/// A stage stopped on input it cannot use (a corrupt frame); the run stopped there.
+#[derive(Debug, thiserror::Error)]
+#[error("{why}\noutputs so far are in {}", out_dir.display())]
+pub struct StoppedOnBadInput {
     pub why: String,
     pub out_dir: PathBuf,
 }

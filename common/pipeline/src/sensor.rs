@@ -94,7 +94,9 @@ pub fn run_sensor(ctx: &RunContext, args: &SensorArgs) -> anyhow::Result<()> {
             return Ok(false);
         }
         let start = now_ns();
-        let frame = source.frame(index)?;
+        let frame = source
+            .frame(index)
+            .map_err(|e| crate::stage_main::BadInput(format!("frame {index}: {e}")))?;
         let stamp = publish_frame(&frames, &frame, &k)?;
         let mut input = stamp;
         input.sent_ns = start;

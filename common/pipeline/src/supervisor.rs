@@ -35,6 +35,8 @@ pub enum Ending {
     Interrupted,
     StopRequested,
     StageFailed(String),
+    /// A stage stopped on input it cannot use (not restarted: it would read the same input).
+    BadInput(String),
 }
 
 /// What the supervisor collected while the stages ran.
@@ -387,7 +389,7 @@ impl RunState {
             }
             self.advance_swap(ch);
             if let Some(failed) = self.watch_children(ctx)? {
-                return Ok(Ending::StageFailed(failed));
+                return Ok(failed);
             }
             if let Some(p) = &mut self.progress {
                 p.update(&self.stages, self.recorder.len(), started);
@@ -611,8 +613,9 @@ impl RunState {
         }
     }
 
-    /// Reaps exited stages, restarts them with back-off; `Some(reason)` when one is out of restarts.
-    fn watch_children(&mut self, ctx: &RunContext) -> anyhow::Result<Option<String>> {
+    /// Reaps exited stages, restarts them with back-off; the ending when one is out of
+    /// restarts, or stopped on bad input.
+    fn watch_children(&mut self, ctx: &RunContext) -> anyhow::Result<Option<Ending>> {
         for i in 0..self.stages.len() {
             if let Some(silent) = self.stages[i].silent_for() {
                 self.note(&format!(
@@ -643,13 +646,21 @@ impl RunState {
                 ));
                 // Its shared-memory resources must go before a replacement opens them.
                 ctx.cleanup_dead_nodes();
+                if status.code() == Some(i32::from(crate::stage_main::BAD_INPUT_EXIT)) {
+                    self.stages[i].state = StageState::Failed;
+                    return Ok(Some(Ending::BadInput(format!(
+                        "stage {name} stopped on input it cannot use (not restarted: it would \
+                         read the same input):\n{}",
+                        self.stages[i].log_tail(3)
+                    ))));
+                }
                 if !self.stages[i].schedule_restart() {
-                    return Ok(Some(format!(
+                    return Ok(Some(Ending::StageFailed(format!(
                         "stage {name} died {} times (limit {}); last log lines:\n{}",
                         self.stages[i].restarts + 1,
                         self.stages[i].spec.restart_limit,
                         self.stages[i].log_tail(15)
-                    )));
+                    ))));
                 }
             }
             if self.stages[i].restart_due() {
