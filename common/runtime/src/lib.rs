@@ -8,9 +8,9 @@ mod error;
 mod signals;
 mod telemetry_sink;
 
-pub use active_run::{ActiveRun, ActiveRuns};
+pub use active_run::{process_alive, ActiveRun, ActiveRuns, CleanError, CleanReport, CleanedRun};
 pub use channel::{Inlet, Outlet, Received};
-pub use context::{leftover_files, RunContext};
+pub use context::{leftover_files, runs_with_files, RunContext};
 pub use error::RuntimeError;
 pub use signals::{finish_requested_flag, FINISH_SIGNAL, STOP_SIGNAL};
 pub use telemetry_sink::{TelemetrySink, HEARTBEAT};

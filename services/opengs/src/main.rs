@@ -25,6 +25,8 @@ enum Command {
     Ablation(cmd::ablation::AblationArgs),
     /// Talk to a running pipeline: status, stop.
     Ctl(cmd::ctl::CtlArgs),
+    /// Remove the shared memory and registry entries of runs whose supervisor died.
+    Clean(cmd::clean::CleanArgs),
     /// Recompute a finished run's metrics (ATE) from its files.
     Eval(cmd::eval::EvalArgs),
     /// Print the per-stage latency table of a finished run.
@@ -55,6 +57,7 @@ fn main() -> ExitCode {
         Command::Run(a) => cmd::run::run(a),
         Command::Ablation(a) => cmd::ablation::run(a),
         Command::Ctl(a) => cmd::ctl::run(a),
+        Command::Clean(a) => cmd::clean::run(a),
         Command::Eval(a) => cmd::eval::run(a),
         Command::Profile(a) => cmd::profile::run(a),
         Command::Synth(a) => cmd::synth::run(a),

@@ -78,6 +78,8 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
 
 /// Starts the pipeline as `args` say and waits for it to finish.
 pub fn execute(args: &RunArgs) -> anyhow::Result<RunSummary> {
+    // A SIGKILLed supervisor leaves its run's shared memory; no one else would remove it.
+    crate::cmd::clean::dead_runs_at_start();
     let mut deploy = DeployFile::load(&args.deploy)?;
     if let Some(kind) = &args.segmenter {
         let stage = deploy
