@@ -116,7 +116,12 @@ impl ConsensusHeader {
             check_count("mapping_count", self.mapping_count, MAX_CONSENSUS_ENTRIES)?,
             check_count("relabel_count", self.relabel_count, MAX_CONSENSUS_ENTRIES)?,
             check_count("prune_count", self.prune_count, MAX_CONSENSUS_ENTRIES)?,
-            check_count("pixel_count", self.pixel_count, 64 * n as u32)?,
+            // 64·n reaches 2^32 at 8192×8192: multiplied in usize, capped at u32::MAX.
+            check_count(
+                "pixel_count",
+                self.pixel_count,
+                (64 * n).min(u32::MAX as usize) as u32,
+            )?,
         ])
     }
 
