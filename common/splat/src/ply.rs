@@ -61,7 +61,9 @@ impl Columns {
             }
         };
         let mut rot = self.rot.map(f);
-        let n2: f32 = rot.iter().map(|q| q * q).sum();
+        // In f64: f32 squares of tiny components lose their bits (and of huge ones overflow).
+        let q = rot.map(f64::from);
+        let n2: f64 = q.iter().map(|q| q * q).sum();
         if !(n2.is_finite() && n2 > 0.0) {
             return Err(PlyError::Invalid {
                 vertex,
@@ -71,7 +73,7 @@ impl Columns {
         // Already-unit quaternions are kept bit-exact (round trips), others normalised.
         if (n2 - 1.0).abs() > 1e-6 {
             let n = n2.sqrt();
-            rot = rot.map(|q| q / n);
+            rot = q.map(|q| (q / n) as f32);
         }
         Ok(Gaussian {
             mean: self.mean.map(f),
