@@ -67,8 +67,14 @@ pub(crate) fn label_path(dir: &Path, index: usize) -> PathBuf {
 
 /// Reads `traj.txt`: one row-major 4×4 camera-to-world matrix per line.
 pub fn read_replica_trajectory(path: &Path) -> Result<Vec<Pose>, DatasetError> {
+    let text = std::fs::read_to_string(path).map_err(|e| DatasetError::io(path, e))?;
+    parse_replica_trajectory(&text, path)
+}
+
+/// Parses the text of a `traj.txt` read from `path`.
+pub fn parse_replica_trajectory(text: &str, path: &Path) -> Result<Vec<Pose>, DatasetError> {
     let mut poses = Vec::new();
-    for (line_no, line) in data_lines(path)? {
+    for (line_no, line) in data_lines(text) {
         let v = parse_numbers(path, line_no, &line)?;
         if v.len() != 16 {
             return Err(DatasetError::parse(
@@ -78,8 +84,9 @@ pub fn read_replica_trajectory(path: &Path) -> Result<Vec<Pose>, DatasetError> {
             ));
         }
         let r = Matrix3::new(v[0], v[1], v[2], v[4], v[5], v[6], v[8], v[9], v[10]);
-        if (r.determinant() - 1.0).abs() > 1e-3
-            || (r.transpose() * r - Matrix3::identity()).norm() > 1e-3
+        // `!(x <= tol)` refuses NaN too (huge entries overflow), on which from_matrix never ends.
+        if !((r.determinant() - 1.0).abs() <= 1e-3
+            && (r.transpose() * r - Matrix3::identity()).norm() <= 1e-3)
         {
             return Err(DatasetError::parse(
                 path,
@@ -91,6 +98,27 @@ pub fn read_replica_trajectory(path: &Path) -> Result<Vec<Pose>, DatasetError> {
         poses.push(Pose::from_parts(Translation3::new(v[3], v[7], v[11]), rot));
     }
     Ok(poses)
+}
+
+/// Parses and checks the text of a `cam_params.json` read from `path`: the camera and the
+/// depth scale (units per metre).
+pub fn parse_cam_params(text: &str, path: &Path) -> Result<(Intrinsics, f32), DatasetError> {
+    let c = serde_json::from_str::<CamParams>(text)
+        .map_err(|e| DatasetError::Parse {
+            path: path.to_path_buf(),
+            line: e.line(),
+            message: e.to_string(),
+        })?
+        .camera;
+    let k = Intrinsics::new(c.fx, c.fy, c.cx, c.cy, c.w, c.h);
+    k.validate().map_err(|e| DatasetError::invalid(path, e))?;
+    if !(c.scale.is_finite() && c.scale > 0.0) {
+        return Err(DatasetError::invalid(
+            path,
+            format!("depth scale {} must be finite and > 0", c.scale),
+        ));
+    }
+    Ok((k, c.scale))
 }
 
 pub struct ReplicaSource {
@@ -123,32 +151,15 @@ impl ReplicaSource {
             true => {
                 let text = std::fs::read_to_string(&params_file)
                     .map_err(|e| DatasetError::io(&params_file, e))?;
-                let p: CamParams =
-                    serde_json::from_str(&text).map_err(|e| DatasetError::Parse {
-                        path: params_file.clone(),
-                        line: e.line(),
-                        message: e.to_string(),
-                    })?;
-                Some(p.camera)
+                Some(parse_cam_params(&text, &params_file)?)
             }
             false => None,
         };
-        if let Some(c) = &params {
-            Intrinsics::new(c.fx, c.fy, c.cx, c.cy, c.w, c.h)
-                .validate()
-                .map_err(|e| DatasetError::invalid(&params_file, e))?;
-            if !(c.scale.is_finite() && c.scale > 0.0) {
-                return Err(DatasetError::invalid(
-                    &params_file,
-                    format!("depth scale {} must be finite and > 0", c.scale),
-                ));
-            }
-        }
         let intrinsics = options.intrinsics.unwrap_or_else(|| match &params {
-            Some(c) => Intrinsics::new(c.fx, c.fy, c.cx, c.cy, c.w, c.h),
+            Some((k, _)) => *k,
             None => replica_default_intrinsics(),
         });
-        let depth_scale = params.as_ref().map_or(REPLICA_DEPTH_SCALE, |c| c.scale);
+        let depth_scale = params.as_ref().map_or(REPLICA_DEPTH_SCALE, |(_, s)| *s);
         let first_frame = frame_path(dir, 0);
         if !first_frame.exists() {
             return Err(DatasetError::Missing { path: first_frame });

@@ -4,16 +4,14 @@ use std::path::Path;
 
 use crate::DatasetError;
 
-/// Non-empty, non-comment lines of a text file with 1-based line numbers.
-pub(crate) fn data_lines(path: &Path) -> Result<Vec<(usize, String)>, DatasetError> {
-    let text = std::fs::read_to_string(path).map_err(|e| DatasetError::io(path, e))?;
-    Ok(text
-        .lines()
+/// Non-empty, non-comment lines of a text file's contents with 1-based line numbers.
+pub(crate) fn data_lines(text: &str) -> Vec<(usize, String)> {
+    text.lines()
         .enumerate()
         .map(|(i, l)| (i + 1, l.trim()))
         .filter(|(_, l)| !l.is_empty() && !l.starts_with('#'))
         .map(|(i, l)| (i, l.to_string()))
-        .collect())
+        .collect()
 }
 
 /// Parses every whitespace-separated field of a line as f64.

@@ -4,7 +4,7 @@
 
 use std::path::Path;
 
-use opengs_eval::TrajectoryError;
+use opengs_eval::{TimedPose, TrajectoryError};
 use opengs_geometry::{format_tum_pose, Pose};
 
 use crate::DatasetError;
@@ -14,7 +14,19 @@ pub type StampedPose = (f64, Pose);
 
 /// Reads a TUM trajectory, sorted by time; errors name the file and line.
 pub fn read_tum_trajectory(path: &Path) -> Result<Vec<StampedPose>, DatasetError> {
-    let poses = opengs_eval::read_tum_trajectory(path).map_err(|e| match e {
+    sorted(opengs_eval::read_tum_trajectory(path))
+}
+
+/// Parses the text of a TUM trajectory read from `path` (`groundtruth.txt`), sorted by time.
+pub fn parse_tum_trajectory(text: &str, path: &Path) -> Result<Vec<StampedPose>, DatasetError> {
+    sorted(opengs_eval::parse_tum_trajectory(text, path))
+}
+
+/// The eval crate's result as the readers want it: errors as [`DatasetError`], poses sorted.
+fn sorted(
+    poses: Result<Vec<TimedPose>, TrajectoryError>,
+) -> Result<Vec<StampedPose>, DatasetError> {
+    let poses = poses.map_err(|e| match e {
         TrajectoryError::Io { path, error } => DatasetError::io(&path, error),
         TrajectoryError::Parse {
             path,

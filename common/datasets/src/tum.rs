@@ -79,17 +79,28 @@ pub struct TumSource {
 /// Reads a `timestamp filename` list (rgb.txt, depth.txt, labels.txt).
 fn read_file_list(dir: &Path, name: &str) -> Result<Vec<(f64, PathBuf)>, DatasetError> {
     let path = dir.join(name);
+    let text = std::fs::read_to_string(&path).map_err(|e| DatasetError::io(&path, e))?;
+    parse_file_list(&text, dir, &path)
+}
+
+/// Parses the text of a `timestamp filename` list read from `path`, file names joined to
+/// `dir`, sorted by time.
+pub fn parse_file_list(
+    text: &str,
+    dir: &Path,
+    path: &Path,
+) -> Result<Vec<(f64, PathBuf)>, DatasetError> {
     let mut list = Vec::new();
-    for (line_no, line) in data_lines(&path)? {
+    for (line_no, line) in data_lines(text) {
         let mut fields = line.split_whitespace();
         let (Some(t), Some(file)) = (fields.next(), fields.next()) else {
             return Err(DatasetError::parse(
-                &path,
+                path,
                 line_no,
                 "expected 'timestamp filename'",
             ));
         };
-        let t = parse_numbers(&path, line_no, t)?[0];
+        let t = parse_numbers(path, line_no, t)?[0];
         list.push((t, dir.join(file)));
     }
     list.sort_by(|a, b| a.0.total_cmp(&b.0));
@@ -98,7 +109,13 @@ fn read_file_list(dir: &Path, name: &str) -> Result<Vec<(f64, PathBuf)>, Dataset
 
 /// Reads `intrinsics.txt`: `fx fy cx cy width height`.
 fn read_intrinsics_file(path: &Path) -> Result<Intrinsics, DatasetError> {
-    let lines = data_lines(path)?;
+    let text = std::fs::read_to_string(path).map_err(|e| DatasetError::io(path, e))?;
+    parse_intrinsics(&text, path)
+}
+
+/// Parses the text of an `intrinsics.txt` read from `path`.
+pub fn parse_intrinsics(text: &str, path: &Path) -> Result<Intrinsics, DatasetError> {
+    let lines = data_lines(text);
     let Some((line_no, line)) = lines.first() else {
         return Err(DatasetError::invalid(
             path,
