@@ -17,6 +17,10 @@ enum BenchWhat {
     /// The SLAM scene suite through the real pipeline: generated rooms × camera paths ×
     /// noise; ATE, PSNR, holes, mIoU, lost frames, tracker p99 per case and the worst row.
     Slam(super::bench_slam::BenchSlamArgs),
+    /// The fault campaign: each stage SIGKILLed (early, mid-run, the mapper in its final
+    /// optimisation) and SIGSTOPped, the supervisor SIGKILLed; every run against the
+    /// fault-free one (ATE, PSNR, mIoU, poses, restarts, hangs).
+    Faults(super::bench_faults::BenchFaultsArgs),
     /// G-ICP registration time and tracker throughput.
     Gicp(super::bench_gicp::BenchGicpArgs),
     /// One mapping step (forward + backward + Adam) with 100k Gaussians at 640×480 and
@@ -57,6 +61,7 @@ pub fn run(args: BenchArgs) -> anyhow::Result<()> {
         BenchWhat::Render(a) => super::bench_render::run(a),
         BenchWhat::Gicp(a) => super::bench_gicp::run(a),
         BenchWhat::Slam(a) => super::bench_slam::run(a),
+        BenchWhat::Faults(a) => super::bench_faults::run(a),
         BenchWhat::Map(a) => super::bench_map::run(a),
         BenchWhat::Consensus { runs } => {
             opengs_semantics::bench::print_consensus_bench(runs);

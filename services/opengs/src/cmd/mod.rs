@@ -1,5 +1,6 @@
 pub mod ablation;
 pub mod bench;
+pub mod bench_faults;
 pub mod bench_gicp;
 pub mod bench_ipc;
 pub mod bench_map;
