@@ -55,6 +55,7 @@ struct Row {
     exit: Option<i32>,
     restarts: u64,
     hangs: u64,
+    /// Frames with a verified pose, and frames the tracker reported lost.
     poses: Option<u64>,
     lost: Option<u64>,
     ate_rmse_cm: Option<f64>,
@@ -133,7 +134,7 @@ pub fn run(args: BenchFaultsArgs) -> anyhow::Result<()> {
             row.within = row.exit == Some(0);
         }
         println!(
-            "  {:<36} exit {:>4}  restarts {} hangs {}  poses {:>4} lost {:>3}  ATE {:>7} cm  \
+            "  {:<36} exit {:>4}  restarts {} hangs {}  verified {:>4} lost {:>3}  ATE {:>7} cm  \
              PSNR {:>6} dB  mIoU {:>5}  {}  ({:.0} s){}",
             row.case,
             row.exit.map_or("-".into(), |c| c.to_string()),
