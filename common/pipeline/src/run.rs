@@ -54,6 +54,13 @@ pub fn run(opts: RunOptions) -> anyhow::Result<RunSummary> {
     }
     let supervised = Supervisor::supervise(&opts)?;
     let run_dir = RunDir::new(&opts.out_dir);
+    // A mapper killed before it wrote map.ply (hung in its final work, say) left its checkpoint.
+    if !run_dir.map().exists() && run_dir.map_checkpoint().exists() {
+        match std::fs::copy(run_dir.map_checkpoint(), run_dir.map()) {
+            Ok(_) => eprintln!("map.ply is the mapper's last checkpoint: it did not finish"),
+            Err(e) => eprintln!("map.ply from the mapper's checkpoint: {e}"),
+        }
+    }
     // Outputs are written on every path: nothing produced is lost.
     crate::run_outputs::write(&run_dir, &opts, &supervised)?;
     let scores = crate::scoring::score(&run_dir, &opts, !supervised.recorder.is_empty());

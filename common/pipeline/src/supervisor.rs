@@ -747,6 +747,19 @@ impl RunState {
                         )
                     };
                     self.note(&msg);
+                } else if let Some(silent) = stage.silent_for() {
+                    // Hung in its final work: waiting out finish_timeout_s would stall the run.
+                    let msg = format!(
+                        "{} (pid {}) sent nothing for {:.1} s in its final work (watchdog_s {}): \
+                         hung or stopped; killing it (its last checkpoint is kept)",
+                        stage.spec.name,
+                        stage.pid().unwrap_or(0),
+                        silent.as_secs_f64(),
+                        stage.spec.watchdog_s
+                    );
+                    stage.kill_hung();
+                    self.note(&msg);
+                    waiting += 1;
                 } else if start.elapsed().as_secs_f64() > stage.spec.finish_timeout_s {
                     let msg = format!(
                         "{}: final work past its {:.0} s limit; stopping it (it keeps what is done)",
