@@ -400,7 +400,12 @@ mod tests {
     fn an_old_process_busy_past_the_grace_period_is_killed() {
         let dir = tempfile::tempdir().expect("tmp");
         // Ignores SIGTERM, like a stage deep in a model call.
-        let mut stage = process("sam", "trap '' TERM; sleep 30", dir.path());
+        let mut stage = process("sam", "trap '' TERM; echo trapped; sleep 30", dir.path());
+        // The shell must have set its trap before the swap asks it to stop.
+        let until = Instant::now() + Duration::from_secs(5);
+        while !stage.log_tail(5).contains("trapped") && Instant::now() < until {
+            std::thread::sleep(Duration::from_millis(10));
+        }
         let new = process("mobilesamv2", "sleep 30", dir.path());
         let new_pid = new.pid().expect("pid");
         let mut swap = Swap::new(0, 7, "sam", new);
