@@ -18,16 +18,6 @@ fn swap(run_id: &str, to: &str) {
     );
 }
 
-fn segments_seen(log: &std::path::Path) -> usize {
-    std::fs::read_to_string(log)
-        .map(|t| {
-            t.lines()
-                .filter(|l| l.split_whitespace().count() == 4)
-                .count()
-        })
-        .unwrap_or(0)
-}
-
 #[test]
 fn segmenter_swaps_mid_run_without_a_gap() {
     let _serial = serial();
@@ -70,7 +60,7 @@ role = "source"
     let log = out.join("logs/probe.log");
     let deadline = Instant::now() + Duration::from_secs(120);
     for (after, to) in [(3, "prior"), (6, "classic")] {
-        while segments_seen(&log) < after {
+        while segment_rows(&log).len() < after {
             assert!(
                 Instant::now() < deadline,
                 "segments stopped arriving before the swap to {to}"
@@ -87,15 +77,7 @@ role = "source"
     );
 
     // seq, arrival, segmenter kind (0 classic, 1 prior), label count.
-    let rows: Vec<(u64, u64, u32)> = std::fs::read_to_string(&log)
-        .expect("probe log")
-        .lines()
-        .filter_map(|l| {
-            let v: Vec<&str> = l.split_whitespace().collect();
-            (v.len() == 4).then(|| (v[0].parse().ok(), v[1].parse().ok(), v[2].parse().ok()))
-        })
-        .filter_map(|(a, b, c)| Some((a?, b?, c?)))
-        .collect();
+    let rows = segment_rows(&log);
     let kinds: Vec<u32> = rows.iter().map(|r| r.2).collect();
     let first_prior = kinds
         .iter()
