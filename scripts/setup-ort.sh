@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Fetches the ONNX Runtime shared library (DEPS.md: onnxruntime 1.31.1 from its
+# Fetches the ONNX Runtime shared library (onnxruntime 1.31.1, from its
 # PyPI wheel) into .ort/ and prints its path. Idempotent; needs python3 + pip.
 set -euo pipefail
 cd "$(dirname "$0")/.."

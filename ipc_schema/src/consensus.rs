@@ -21,7 +21,7 @@ pub struct PixelRun {
     pub count: u32,
 }
 
-/// A counter-pruning region (METHOD §5.3): Gaussians labelled `label` (ℓr) in the top-K of
+/// A counter-pruning region (docs/METHOD.md §5.3): Gaussians labelled `label` (ℓr) in the top-K of
 /// pixels `pixels[offset .. offset + count]` are pruned when larger than the header's θ.
 #[derive(Debug, Clone, Copy, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
 #[repr(C)]

@@ -10,7 +10,7 @@ use crate::{MessageKind, SchemaError, Stamp};
 /// Most map labels one render may report.
 pub const MAX_RENDER_LABELS: u32 = 65_535;
 
-/// Per-label visibility in one render (METHOD §5.2 completeness).
+/// Per-label visibility in one render (docs/METHOD.md §5.2 completeness).
 #[derive(Debug, Clone, Copy, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
 #[repr(C)]
 pub struct LabelCompleteness {

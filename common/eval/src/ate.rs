@@ -1,4 +1,4 @@
-//! Absolute trajectory error (METHOD §9): associate by timestamp, align the
+//! Absolute trajectory error (docs/METHOD.md §9): associate by timestamp, align the
 //! estimated positions to ground truth with Umeyama (rigid, no scale),
 //! report RMSE *and* mean (GS-ICP SLAM prints the mean under the name RMSE).
 

@@ -1,4 +1,4 @@
-//! Evaluation metrics (METHOD.md §9).
+//! Evaluation metrics (docs/METHOD.md §9).
 
 pub mod ate;
 pub mod label_png;

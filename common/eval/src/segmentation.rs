@@ -1,4 +1,4 @@
-//! Instance segmentation scores over a whole sequence (METHOD §9): one global one-to-one
+//! Instance segmentation scores over a whole sequence (docs/METHOD.md §9): one global one-to-one
 //! matching of predicted labels to ground-truth instances, so a label that changes id between
 //! views is penalised.
 //!

@@ -1,6 +1,6 @@
 //! Camera model and rigid-body poses shared by every stage.
 //!
-//! Conventions (METHOD.md §2): pinhole intrinsics in the OpenCV pixel
+//! Conventions (docs/METHOD.md §2): pinhole intrinsics in the OpenCV pixel
 //! convention (pixel (u, v) has its centre at integer coordinates), poses
 //! stored camera-to-world as in TUM and Replica files, camera looking down +z.
 

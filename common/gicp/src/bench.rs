@@ -10,7 +10,7 @@ use crate::{
 use nalgebra::{Isometry3, Point3, Vector3};
 use std::time::Instant;
 
-/// Source sampling stride (METHOD §7, TUM-size images).
+/// Source sampling stride (docs/METHOD.md §7, TUM-size images).
 pub const SOURCE_STRIDE: usize = 5;
 /// Depths beyond this are ignored (metres).
 pub const MAX_DEPTH: f64 = 10.0;

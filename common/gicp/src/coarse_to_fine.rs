@@ -59,7 +59,7 @@ impl Default for CoarseToFine {
 }
 
 impl CoarseToFine {
-    /// Only the fine registration (METHOD §7 as written).
+    /// Only the fine registration (docs/METHOD.md §7 as written).
     pub fn fine_only() -> Self {
         Self {
             coarse_voxel: 0.0,

@@ -8,7 +8,7 @@ pub enum Solver {
     LevenbergMarquardt,
 }
 
-/// Registration settings. Defaults are METHOD §7's TUM-size values;
+/// Registration settings. Defaults are docs/METHOD.md §7's TUM-size values;
 /// [`RegistrationConfig::replica`] gives the Replica-size ones.
 #[derive(Debug, Clone, PartialEq)]
 pub struct RegistrationConfig {
@@ -43,7 +43,7 @@ impl Default for RegistrationConfig {
 }
 
 impl RegistrationConfig {
-    /// TUM-size images (METHOD §7).
+    /// TUM-size images (docs/METHOD.md §7).
     pub fn tum() -> Self {
         Self {
             solver: Solver::GaussNewton,
@@ -60,7 +60,7 @@ impl RegistrationConfig {
         }
     }
 
-    /// Replica-size images (METHOD §7).
+    /// Replica-size images (docs/METHOD.md §7).
     pub fn replica() -> Self {
         Self {
             max_correspondence_distance: 0.02,

@@ -2,7 +2,7 @@ use crate::{GicpError, PointTree};
 use nalgebra::{Matrix3, Point3, SymmetricEigen, UnitQuaternion, Vector3};
 use rayon::prelude::*;
 
-/// METHOD.md §7: covariances from the 10 nearest neighbours.
+/// docs/METHOD.md §7: covariances from the 10 nearest neighbours.
 pub const DEFAULT_NEIGHBOURS: usize = 10;
 
 /// Smallest allowed (normalised) eigenvalue: keeps every covariance invertible.
@@ -12,7 +12,7 @@ const EPSILON: f64 = 1e-3;
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum Regularization {
     /// GS-ICP / fast_gicp: eigenvalues divided by the middle one, clamped
-    /// at ≥ 1e-3. Keeps the ellipse's shape, removes its scale (METHOD §7).
+    /// at ≥ 1e-3. Keeps the ellipse's shape, removes its scale (docs/METHOD.md §7).
     #[default]
     NormalizedEllipse,
     /// small_gicp: eigenvalues replaced by (1, 1, 1e-3), i.e. a thin disc

@@ -1,4 +1,4 @@
-//! Generalized-ICP registration (METHOD.md §7), laid out like small_gicp:
+//! Generalized-ICP registration (docs/METHOD.md §7), laid out like small_gicp:
 //! one concern per file, each reading like the maths it implements.
 //!
 //! Pipeline of the tracker:

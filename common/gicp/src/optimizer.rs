@@ -21,7 +21,7 @@ pub struct Registration {
     /// Root mean square Euclidean distance of the inlier correspondences (m).
     pub inlier_rmse: f64,
     /// Fraction of source points whose nearest target point is within
-    /// `overlapped_th` squared distance (METHOD §7 keyframe rule).
+    /// `overlapped_th` squared distance (docs/METHOD.md §7 keyframe rule).
     pub overlap: f64,
     /// Final summed Mahalanobis error `Σ dᵀ Ω d`.
     pub error: f64,

@@ -15,7 +15,7 @@ pub struct DepthSamples {
 }
 
 /// Back-projects every `stride`-th pixel of a row-major depth image
-/// (METHOD §7: stride 10 for Replica-size, 5 for TUM-size images).
+/// (docs/METHOD.md §7: stride 10 for Replica-size, 5 for TUM-size images).
 /// Raw value 0 means "no depth"; depths beyond `max_depth` metres are dropped.
 pub fn sample_depth_grid(
     depth: &[u16],

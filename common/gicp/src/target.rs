@@ -4,7 +4,7 @@ use crate::{Cloud, GicpError, NeighbourGrid, PointTree};
 use nalgebra::{Isometry3, Matrix3, Point3, Vector3};
 use std::sync::OnceLock;
 
-/// One map Gaussian as the tracker sees it (METHOD §7: mean, rotation, scale).
+/// One map Gaussian as the tracker sees it (docs/METHOD.md §7: mean, rotation, scale).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Gaussian {
     pub mean: Point3<f64>,
@@ -15,7 +15,7 @@ pub struct Gaussian {
 }
 
 /// Radius (m) of the target's fast correspondence grid: √1e-3 covers
-/// METHOD §7's TUM and Replica correspondence and overlap thresholds.
+/// docs/METHOD.md §7's TUM and Replica correspondence and overlap thresholds.
 pub const DEFAULT_SEARCH_RADIUS: f64 = 0.031_7;
 
 /// What a source is registered against: points, their precomputed

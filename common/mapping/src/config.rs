@@ -2,12 +2,12 @@ use opengs_splat::{LossWeights, PruneConfig};
 
 use crate::HoleFilling;
 
-/// Mapper settings; defaults follow METHOD §8 for TUM-size images.
+/// Mapper settings; defaults follow docs/METHOD.md §8 for TUM-size images.
 #[derive(Debug, Clone, PartialEq)]
 pub struct MapperConfig {
     /// A keyframe point becomes a Gaussian only if no Gaussian is within this distance (m).
     pub overlap_distance: f32,
-    /// Opacity of new Gaussians. METHOD §8 (after GS-ICP SLAM) says 0.1, a value made for
+    /// Opacity of new Gaussians. docs/METHOD.md §8 (after GS-ICP SLAM) says 0.1, a value made for
     /// thousands of GPU iterations; the CPU mapper gets about two iterations per keyframe,
     /// and a 0.1-opaque map renders translucent and dark until opacity is learned (synthetic
     /// room, 600 frames, 2 steps per keyframe: end-of-run PSNR 21.0 dB at 0.1, 23.4 at 0.9

@@ -57,7 +57,7 @@ const SPACING_NEIGHBOURS: usize = 4;
 const MIN_AXIS: f64 = 0.1;
 
 /// New Gaussians for the keyframe points that have no map Gaussian within
-/// `overlap_distance` (METHOD §8): mean = point, shape = the point's covariance,
+/// `overlap_distance` (docs/METHOD.md §8): mean = point, shape = the point's covariance,
 /// largest axis = `scale` × local sample spacing, colour from the keyframe image.
 pub fn gaussians_from_points(
     input: &DensifyInput,

@@ -1,8 +1,8 @@
-//! The Gaussian map as the mapper stage keeps it (METHOD §8): Gaussians
+//! The Gaussian map as the mapper stage keeps it (docs/METHOD.md §8): Gaussians
 //! initialised from keyframe points where the map is empty, optimised
 //! continuously against stored keyframes (newest first, then random), pruned,
 //! and the trackable subset handed back to the tracker; and the mapper's side of the
-//! semantic loop ([`SemanticLoop`], METHOD §3–§5): a GS Voting render with its G_topK for
+//! semantic loop ([`SemanticLoop`], docs/METHOD.md §3–§5): a GS Voting render with its G_topK for
 //! each segmented keyframe, and the consensus result (relabels, labels for new Gaussians,
 //! counter pruning) applied through it. [`Mapper`] holds both; the dependency runs one way
 //! (`mapper` → `semantic`).

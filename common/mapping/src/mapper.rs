@@ -81,7 +81,7 @@ impl Mapper {
         self.iterations
     }
 
-    /// Adds a keyframe: new Gaussians at its points where no Gaussian is near (METHOD §8),
+    /// Adds a keyframe: new Gaussians at its points where no Gaussian is near (docs/METHOD.md §8),
     /// then at its depth samples the map still leaves open ([`crate::HoleFilling`]), and the
     /// frame as a training target. Returns how many Gaussians were added.
     pub fn add_keyframe(&mut self, input: &DensifyInput, keyframe: StoredKeyframe) -> usize {
@@ -148,7 +148,7 @@ impl Mapper {
         Some(stats)
     }
 
-    /// Gaussians opaque enough to track against (METHOD §7).
+    /// Gaussians opaque enough to track against (docs/METHOD.md §7).
     pub fn trackable(&self) -> TrackableGaussians {
         let mut t = TrackableGaussians::default();
         for i in 0..self.map.len() {

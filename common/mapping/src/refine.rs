@@ -1,4 +1,4 @@
-//! Offline refinement of a finished map: more Adam steps of the mapping loss (METHOD §8) on
+//! Offline refinement of a finished map: more Adam steps of the mapping loss (docs/METHOD.md §8) on
 //! a run's keyframes in random order, with periodic pruning and, in the first half,
 //! splitting of the Gaussians with the largest positional gradients ([`crate::splitting`]).
 

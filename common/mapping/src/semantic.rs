@@ -1,9 +1,9 @@
 //! The mapper's side of the semantic loop ([`SemanticLoop`]): a GS Voting render at a keyframe
 //! pose for the consensus, kept with its G_topK until the consensus result comes back, and
-//! that result applied to the map (METHOD §3–§5). It owns only the renders; the map and the
+//! that result applied to the map (docs/METHOD.md §3–§5). It owns only the renders; the map and the
 //! optimiser state it changes are passed in by the [`crate::Mapper`] that holds it.
 //!
-//! Decisions where METHOD.md is open:
+//! Decisions where docs/METHOD.md is open:
 //! - Unlabelled (label 0) Gaussians whose centre projects onto a labelled pixel of the
 //!   consistent input label map, and that are visible there (weight α·T ≥ 0.05 in the pixel's
 //!   top-K, or within 5 cm + 5 % of the rendered surface depth), take that pixel's label. For

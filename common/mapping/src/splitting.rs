@@ -2,7 +2,7 @@
 //! a large positional gradient (they sit on edges and detail they cannot represent) are
 //! split into two smaller ones sampled from their own distribution.
 //!
-//! The online mapper only adds Gaussians at keyframe points (METHOD §8), about one per
+//! The online mapper only adds Gaussians at keyframe points (docs/METHOD.md §8), about one per
 //! 2 cm; texture edges finer than that stay blurred however long it optimises. Offline
 //! refinement has the time to add Gaussians where the loss asks for them.
 

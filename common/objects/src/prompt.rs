@@ -1,4 +1,5 @@
-//! The paper's point and box prompts, answered by GS Voting on a render of the view (METHOD §3):
+//! The paper's point and box prompts, answered by GS Voting on a render of the view
+//! (docs/METHOD.md §3):
 //!
 //! ```text
 //! pixel (u, v):  W_ℓ = Σ α_i T_i over the Gaussians i of label ℓ that composite onto (u, v)

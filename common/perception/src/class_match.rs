@@ -1,4 +1,4 @@
-//! Mask ↔ box class assignment of the ensemble (METHOD.md §6): every mask
+//! Mask ↔ box class assignment of the ensemble (docs/METHOD.md §6): every mask
 //! label takes the class of the detection box it overlaps best, if that
 //! pixel IoU is above 0.5; otherwise it stays class `None` with score 0.0.
 //!

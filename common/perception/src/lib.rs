@@ -1,11 +1,11 @@
-//! Open-set instance segmentation front-ends for opengs (METHOD.md §6).
+//! Open-set instance segmentation front-ends for opengs (docs/METHOD.md §6).
 //!
 //! Every back-end implements [`Segmenter`]: an RGB-D frame in, a label map
 //! plus the input Label-Class table out. `geometry` (depth-first, LCCP-style)
 //! and `classic` (graph-based) need no weights,
 //! `prior` replays the dataset's ground-truth instances; `sam` and
 //! `mobilesamv2` run exported ONNX models (cargo feature `onnx`, runtime
-//! library from `ORT_DYLIB_PATH`, see DEPS.md). An optional ensemble
+//! library from `ORT_DYLIB_PATH`, see `scripts/setup-ort.sh`). An optional ensemble
 //! (tagger + open-vocabulary detector, [`ensemble`]) names the masks of any
 //! segmenter; [`model_check`] checks exported files against their role.
 

@@ -12,7 +12,7 @@ pub struct SamModelPaths {
     pub decoder: PathBuf,
 }
 
-/// The optional ensemble models that put class names on masks (METHOD §6;
+/// The optional ensemble models that put class names on masks (docs/METHOD.md §6;
 /// export layouts in the `ensemble` module and the README's models section).
 #[derive(Debug, Clone, PartialEq, Eq, Default)]
 pub struct EnsembleModelPaths {

@@ -1,6 +1,6 @@
 //! Segmenter output: a per-pixel label map plus the input Label-Class table.
 
-/// One entry of the input Label-Class table (METHOD.md §6).
+/// One entry of the input Label-Class table (docs/METHOD.md §6).
 #[derive(Debug, Clone, PartialEq)]
 pub struct SegmentInfo {
     /// Label id as painted in the label map (never 0).

@@ -1,5 +1,5 @@
 //! The consensus stage: joins the segmenter's segments and the mapper's GS Voting render of
-//! the same keyframe (by seq), runs METHOD §5, and sends the result to the mapper. It owns
+//! the same keyframe (by seq), runs docs/METHOD.md §5, and sends the result to the mapper. It owns
 //! the global Label-Class table and keeps it in the run directory (`label_table.json`), so a
 //! restarted consensus resumes with the labels the map already carries.
 
@@ -83,7 +83,7 @@ pub struct ConsensusArgs {
     #[command(flatten)]
     pub run: ConsensusRunFlags,
     /// θ (m): counter Gaussians larger than this are pruned. Default: 0.25 for TUM, 0.10
-    /// otherwise (METHOD §5.3).
+    /// otherwise (docs/METHOD.md §5.3).
     #[arg(long)]
     pub counter_prune_scale: Option<f32>,
     /// Don't save each segmenter label map as segments/NNNNNN.png (used for `miou_raw`).

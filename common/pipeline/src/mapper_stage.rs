@@ -63,7 +63,7 @@ pub struct MapperArgs {
     /// Threads for rendering and optimisation.
     #[arg(long, default_value_t = 2)]
     pub threads: usize,
-    /// K of the per-pixel top-K kept from each render for the consensus (METHOD §3).
+    /// K of the per-pixel top-K kept from each render for the consensus (docs/METHOD.md §3).
     #[arg(long, default_value_t = opengs_splat::DEFAULT_TOP_K)]
     pub top_k: usize,
     #[command(flatten)]

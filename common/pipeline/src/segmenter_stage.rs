@@ -1,6 +1,6 @@
 //! The segmenter stage: the newest keyframe in (older ones dropped, so a slow
 //! segmenter never holds the pipeline back), a label map with confidences and
-//! the input Label-Class table out (METHOD §6).
+//! the input Label-Class table out (docs/METHOD.md §6).
 
 use std::path::PathBuf;
 

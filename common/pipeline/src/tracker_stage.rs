@@ -84,7 +84,7 @@ struct TrackerStage {
 }
 
 impl TrackerStage {
-    /// Hands the map's trackable Gaussians to the tracker (METHOD §7); its model is rebuilt
+    /// Hands the map's trackable Gaussians to the tracker (docs/METHOD.md §7); its model is rebuilt
     /// on the tracker's model thread and used from the frame after it is ready.
     fn handle_map_target(&mut self, h: &MapTargetHeader, payload: &[u8]) {
         let view = match h.decode(payload) {

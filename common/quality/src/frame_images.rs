@@ -15,7 +15,7 @@ pub fn check_frame(frame: &RgbdFrame, intrinsics: &Intrinsics) -> Result<(), Qua
         })
 }
 
-/// True where the input has depth: the pixels PSNR / SSIM are evaluated on (METHOD §9).
+/// True where the input has depth: the pixels PSNR / SSIM are evaluated on (docs/METHOD.md §9).
 pub fn valid_depth_mask(frame: &RgbdFrame) -> Vec<bool> {
     frame.depth.iter().map(|&d| d != 0).collect()
 }

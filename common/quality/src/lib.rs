@@ -1,5 +1,5 @@
-//! Scores of a finished run (METHOD §9), each read from its run directory and merged into its
-//! `metrics.json`: the trajectory's ATE ([`evaluate_run_trajectory`]); render quality, PSNR /
+//! Scores of a finished run (docs/METHOD.md §9), each read from its run directory and merged into
+//! its `metrics.json`: the trajectory's ATE ([`evaluate_run_trajectory`]); render quality, PSNR /
 //! SSIM of renders against the input frames with pixels of missing depth masked, holes, and
 //! side-by-side PNGs ([`evaluate_run_quality`], or its parts [`evaluate_dataset_quality`] and
 //! [`write_quality_metrics`]); labels, mIoU / accuracy of label maps rendered at held-out

@@ -1,4 +1,4 @@
-//! Masked PSNR (METHOD §9): over pixels with valid input depth only.
+//! Masked PSNR (docs/METHOD.md §9): over pixels with valid input depth only.
 
 use crate::image_pair::check_sizes;
 

@@ -22,7 +22,7 @@ pub struct FrameQuality {
 /// A valid-depth pixel whose render accumulates less α than this is a hole in the map.
 pub const HOLE_SILHOUETTE: f32 = 0.5;
 
-/// Render quality over a set of frames (METHOD §9: masked where input depth is missing).
+/// Render quality over a set of frames (docs/METHOD.md §9: masked where input depth is missing).
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct QualityReport {
     pub frames_evaluated: usize,

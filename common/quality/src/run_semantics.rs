@@ -1,4 +1,4 @@
-//! Semantic outputs of a finished run (METHOD §9): `labels.json` (the global Label-Class
+//! Semantic outputs of a finished run (docs/METHOD.md §9): `labels.json` (the global Label-Class
 //! table with Gaussian counts from map.ply), mIoU / accuracy of label maps rendered from the
 //! map at held-out poses (frames that were not keyframes), and `miou_raw`: the segmenter's
 //! own per-keyframe label maps (segments/*.png) scored the same way. Both use one global

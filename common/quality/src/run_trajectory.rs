@@ -16,7 +16,7 @@ pub struct RunMetrics {
     pub frames: usize,
     /// Frames without one (`lost.txt`): tracking was lost, or the frame had no depth.
     pub frames_lost: usize,
-    /// ATE after rigid (no-scale) Umeyama alignment over the verified poses, METHOD §9.
+    /// ATE after rigid (no-scale) Umeyama alignment over the verified poses, docs/METHOD.md §9.
     pub ate_rmse_cm: Option<f64>,
     pub ate_mean_cm: Option<f64>,
     pub ate_max_cm: Option<f64>,

@@ -1,4 +1,4 @@
-//! Masked SSIM (METHOD §9): the standard 11×11 Gaussian window (σ = 1.5, C1 = 0.01²,
+//! Masked SSIM (docs/METHOD.md §9): the standard 11×11 Gaussian window (σ = 1.5, C1 = 0.01²,
 //! C2 = 0.03²), with window statistics taken over valid pixels only.
 //!
 //! Normalised convolution: with mask m and window G, μx = G∗(m·x) / G∗m, and likewise for

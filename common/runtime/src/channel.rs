@@ -147,7 +147,8 @@ impl<H: Debug + ZeroCopySend + 'static> Inlet<H> {
             .buffer_size(spec.subscriber_buffer)
             .create()
             .map_err(|e| RuntimeError::Iceoryx(format!("subscriber on '{}': {e:?}", spec.name)))?;
-        // A subscriber is connected only after its first receive (DEPS.md gotcha 1).
+        // A subscriber is connected only after its first receive (iceoryx2 0.10): early samples
+        // would be lost without this one.
         let _ = subscriber.receive();
         let listener = open_event(ctx, node, spec)?
             .listener_builder()

@@ -1,4 +1,4 @@
-//! Actions of each relation (METHOD.md §5): who gets which label, which Gaussians move.
+//! Actions of each relation (docs/METHOD.md §5): who gets which label, which Gaussians move.
 
 use std::collections::{BTreeMap, BTreeSet};
 

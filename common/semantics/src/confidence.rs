@@ -1,4 +1,4 @@
-//! Input confidence update (METHOD.md §5.2): C_s ← mean over ℓs's pixels of Cov_r(p)·C_s.
+//! Input confidence update (docs/METHOD.md §5.2): C_s ← mean over ℓs's pixels of Cov_r(p)·C_s.
 
 use std::collections::BTreeMap;
 

@@ -1,10 +1,11 @@
-//! Thresholds and ablation switches of the label consensus (METHOD.md §5).
+//! Thresholds and ablation switches of the label consensus (docs/METHOD.md §5).
 
 use serde::{Deserialize, Serialize};
 
 use crate::error::{Result, SemanticsError};
 
-/// Consensus configuration; every threshold of METHOD.md §5 is here, none is a literal in code.
+/// Consensus configuration; every threshold of docs/METHOD.md §5 is here, none is a literal in
+/// code.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default)]
 pub struct ConsensusConfig {

@@ -1,4 +1,4 @@
-//! `LabelConsensus`: owns the global label table and runs METHOD.md §5 for each keyframe.
+//! `LabelConsensus`: owns the global label table and runs docs/METHOD.md §5 for each keyframe.
 
 use std::collections::BTreeMap;
 

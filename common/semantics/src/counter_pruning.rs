@@ -1,4 +1,4 @@
-//! Segmentation counter pruning selection (METHOD.md §5.3).
+//! Segmentation counter pruning selection (docs/METHOD.md §5.3).
 
 use crate::error::Result;
 use crate::output::CounterPruneRegion;

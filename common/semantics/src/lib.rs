@@ -1,4 +1,4 @@
-//! Label tables and confidence-based 2D label consensus (METHOD.md §3–§5, GitHub issue 7).
+//! Label tables and confidence-based 2D label consensus (docs/METHOD.md §3–§5, GitHub issue 7).
 //!
 //! [`LabelConsensus::process`] takes one keyframe's segmenter output ([`SegmenterInput`]) and
 //! the GS Voting render at the same pose ([`RenderedInput`]) and returns plain data
@@ -8,7 +8,7 @@
 //! [`apply_relabels`] first, then [`select_counter_gaussians`], so Gaussians just moved to a
 //! fresh label are not pruned as counters of their old one. No IPC here.
 //!
-//! # Decisions where METHOD.md is open
+//! # Decisions where docs/METHOD.md is open
 //! - Relations only consider non-zero rendered labels; "New" means a < τ3 for all of them.
 //! - Resolution order per input label: Full > Partial > Whole > New > other. A rendered
 //!   label already used as a Full or Partial target is not also a Whole part (only possible at

@@ -26,7 +26,7 @@ pub struct LabelAssignment {
     pub confidence: f32,
 }
 
-/// Map Gaussians labelled `from` in the top-K lists of `pixels` get label `to` (METHOD.md §4).
+/// Map Gaussians labelled `from` in the top-K lists of `pixels` get label `to` (docs/METHOD.md §4).
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
 pub struct RelabelInstruction {
     pub from: u32,

@@ -1,4 +1,4 @@
-//! The relabel step of METHOD.md §4, through a render's G_topK ([`TopK`]).
+//! The relabel step of docs/METHOD.md §4, through a render's G_topK ([`TopK`]).
 
 use opengs_splat::TopK;
 

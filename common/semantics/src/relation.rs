@@ -1,4 +1,4 @@
-//! Relations between an input label ℓs and a rendered label ℓr (METHOD.md §5 table).
+//! Relations between an input label ℓs and a rendered label ℓr (docs/METHOD.md §5 table).
 
 use serde::{Deserialize, Serialize};
 

@@ -1,4 +1,4 @@
-//! Relation boundaries of METHOD.md §5 (τ1 = 0.85, τ2 = 0.9, τ3 = 0.1) on both sides.
+//! Relation boundaries of docs/METHOD.md §5 (τ1 = 0.85, τ2 = 0.9, τ3 = 0.1) on both sides.
 
 mod common;
 

@@ -1,4 +1,4 @@
-//! Per-pixel compositing maths (METHOD §2), shared by the fast and reference renderers
+//! Per-pixel compositing maths (docs/METHOD.md §2), shared by the fast and reference renderers
 //! so both produce bit-identical weights.
 
 /// Alpha below this is skipped (3DGS: 1/255).

@@ -2,7 +2,7 @@
 
 use opengs_geometry::{Intrinsics, Pose};
 
-/// Near plane (m) of mapping, evaluation and `opengs render` cameras (METHOD §2).
+/// Near plane (m) of mapping, evaluation and `opengs render` cameras (docs/METHOD.md §2).
 pub const DEFAULT_NEAR: f32 = 0.05;
 
 /// Everything the projection needs about a view.

@@ -1,4 +1,4 @@
-//! The K heaviest of a pixel's contributions when it has more than K (METHOD §3's G_topK),
+//! The K heaviest of a pixel's contributions when it has more than K (docs/METHOD.md §3's G_topK),
 //! kept in front-to-back order: a quickselect whose candidates are lane bit masks.
 
 use crate::cpu::SimdLevel;

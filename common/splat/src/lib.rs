@@ -1,10 +1,10 @@
-//! 3D Gaussian map and the GS Voting rasterizer (METHOD.md §1–3).
+//! 3D Gaussian map and the GS Voting rasterizer (docs/METHOD.md §1–3).
 //!
 //! Forward pass split as gsplat does: [`project`] (EWA) → [`bin_and_sort`] (16×16 tiles,
 //! per-tile depth order) → [`rasterize`] (colour, depth, silhouette and, on request, voted
 //! labels, per-pixel top-K and per-label visible counts, in one pass). [`render`] runs all three.
 //!
-//! Mapping (METHOD §8, CPU): [`train_step`] = colour + depth render → [`Loss`] (L1 + SSIM +
+//! Mapping (docs/METHOD.md §8, CPU): [`train_step`] = colour + depth render → [`Loss`] (L1 + SSIM +
 //! depth L1) → [`Backward`] (rasterizer, then projection chain) → [`Adam`]; [`prune`].
 
 mod adam;

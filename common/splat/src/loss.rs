@@ -1,4 +1,4 @@
-//! Mapping loss (METHOD §8): `w_l1·L1(C) + w_ssim·(1 − SSIM(C)) + w_depth·L1(D)`, with
+//! Mapping loss (docs/METHOD.md §8): `w_l1·L1(C) + w_ssim·(1 − SSIM(C)) + w_depth·L1(D)`, with
 //! pixels of invalid (0) target depth left out of the depth term; value and dL/dC, dL/dD.
 
 use rayon::prelude::*;

@@ -1,4 +1,4 @@
-//! The Gaussian map as a struct of arrays (METHOD §1).
+//! The Gaussian map as a struct of arrays (docs/METHOD.md §1).
 
 use nalgebra::{Matrix3, Quaternion, UnitQuaternion, Vector3};
 

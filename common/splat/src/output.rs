@@ -8,7 +8,7 @@ use crate::top_k::TopK;
 /// cost (almost) nothing when not asked for.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub struct RenderRequest {
-    /// GS Voting label map (METHOD §3).
+    /// GS Voting label map (docs/METHOD.md §3).
     pub labels: bool,
     /// Top-K Gaussians per pixel by weight; `Some(k)` with k ≥ 1.
     pub top_k: Option<usize>,

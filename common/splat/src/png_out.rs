@@ -57,7 +57,8 @@ pub fn write_render_pngs(
         ImageBuffer::<Rgb<u8>, _>::from_fn(w, h, |x, y| Rgb(label_color(lab(x, y)))).save(&path)?;
         written.push(path);
         let path = dir.join("labels_u16.png");
-        // Labels are capped far below 65535 (METHOD §5: 2000 per run); saturate just in case.
+        // Labels are capped far below 65535 (docs/METHOD.md §5: 2000 per run); saturate just in
+        // case.
         ImageBuffer::<Luma<u16>, _>::from_fn(w, h, |x, y| Luma([lab(x, y).min(65535) as u16]))
             .save(&path)?;
         written.push(path);

@@ -1,4 +1,4 @@
-//! EWA projection of 3D Gaussians to screen space (METHOD §2, reference 3DGS `preprocess`).
+//! EWA projection of 3D Gaussians to screen space (docs/METHOD.md §2, reference 3DGS `preprocess`).
 
 use rayon::prelude::*;
 

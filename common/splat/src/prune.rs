@@ -1,4 +1,4 @@
-//! Pruning (METHOD §8): transparent Gaussians and Gaussians too large for the scene.
+//! Pruning (docs/METHOD.md §8): transparent Gaussians and Gaussians too large for the scene.
 
 use crate::adam::Adam;
 use crate::map::GaussianMap;

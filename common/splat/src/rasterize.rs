@@ -1,4 +1,4 @@
-//! Tile rasterizer (METHOD §2–3): front-to-back alpha compositing of colour, depth and
+//! Tile rasterizer (docs/METHOD.md §2–3): front-to-back alpha compositing of colour, depth and
 //! silhouette, with GS Voting labels, top-K and visibility in the same pass.
 //!
 //! Each tile walks its depth-sorted list Gaussian by Gaussian and updates only the rows

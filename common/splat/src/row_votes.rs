@@ -1,4 +1,4 @@
-//! GS Voting sums of one tile (METHOD §3), kept per tile row: every Gaussian gives all the
+//! GS Voting sums of one tile (docs/METHOD.md §3), kept per tile row: every Gaussian gives all the
 //! pixels of a row visit one label, so a row keeps a short table of the labels it met and,
 //! per label, a 16-lane vector of summed weights (0 where a pixel never took that label). A
 //! visit is one table lookup and one vector add; the winner per pixel is a few vector

@@ -1,4 +1,4 @@
-//! GS Voting (METHOD §3): the label with the largest summed weight at a pixel.
+//! GS Voting (docs/METHOD.md §3): the label with the largest summed weight at a pixel.
 
 /// Votes over one pixel's contributions `(label, weight)` in front-to-back order.
 /// Label 0 never wins over a real label; no real-labelled contributor → 0. Ties go to the

@@ -2,7 +2,7 @@ use opengs_gicp::{CoarseToFine, RegistrationConfig, Regularization, DEFAULT_NEIG
 
 use crate::{RelocaliseConfig, VerifyConfig};
 
-/// Tracker settings; defaults are METHOD §7's TUM-size values.
+/// Tracker settings; defaults are docs/METHOD.md §7's TUM-size values.
 #[derive(Debug, Clone, PartialEq)]
 pub struct TrackerConfig {
     /// Depth sampling stride in pixels (5 TUM-size, 10 Replica-size).
@@ -10,7 +10,7 @@ pub struct TrackerConfig {
     /// Neighbours per covariance (10).
     pub neighbours: usize,
     pub regularization: Regularization,
-    /// The fine registration (METHOD §7) …
+    /// The fine registration (docs/METHOD.md §7) …
     pub registration: RegistrationConfig,
     /// … and the wide stages run before it.
     pub coarse_to_fine: CoarseToFine,

@@ -244,7 +244,7 @@ impl FrameTracker {
         self.lost.is_some()
     }
 
-    /// The map's trackable Gaussians as of keyframe `seq` (METHOD §7); the model that
+    /// The map's trackable Gaussians as of keyframe `seq` (docs/METHOD.md §7); the model that
     /// includes them is used from the frame after it is built.
     pub fn set_map(&mut self, seq: u64, gaussians: MapGaussians) {
         let regularization = self.config.regularization;

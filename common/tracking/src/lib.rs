@@ -1,4 +1,4 @@
-//! Frame-to-model tracking after GS-ICP SLAM (METHOD §7), made to hold on
+//! Frame-to-model tracking after GS-ICP SLAM (docs/METHOD.md §7), made to hold on
 //! motion it was not tuned on: coarse-to-fine G-ICP of each frame's depth
 //! samples from a constant-velocity prediction, every result verified, lost
 //! frames reported as lost (no keyframe, no Gaussians), relocalisation from

@@ -1,6 +1,6 @@
 //! The model the tracker registers against, and where it is built.
 //!
-//! The model is the map's trackable Gaussians (METHOD §7) plus the points of
+//! The model is the map's trackable Gaussians (docs/METHOD.md §7) plus the points of
 //! the keyframes the map does not contain yet (before the first map: the
 //! keyframes' points alone), at two resolutions for coarse-to-fine
 //! registration. Building it (covariances, hash grids, kd-trees) takes tens

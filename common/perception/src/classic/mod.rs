@@ -1,5 +1,5 @@
 //! "Segment everything" without weights: Felzenszwalb–Huttenlocher graph
-//! segmentation over colour, depth gaps and normal angles (METHOD.md §6).
+//! segmentation over colour, depth gaps and normal angles (docs/METHOD.md §6).
 
 mod confidence;
 pub(crate) mod downscale;

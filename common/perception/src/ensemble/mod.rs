@@ -1,4 +1,4 @@
-//! The ensemble semantic information generator (METHOD.md §6): a tagger
+//! The ensemble semantic information generator (docs/METHOD.md §6): a tagger
 //! proposes class names, an open-vocabulary detector turns them into boxes,
 //! and every mask of the class-agnostic segmenter takes the class of the
 //! box it overlaps with IoU > 0.5 (else `None`, score 0.0; see

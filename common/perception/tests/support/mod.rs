@@ -32,7 +32,7 @@ pub fn runtime_available() -> bool {
         panic!("OPENGS_REQUIRE_ORT is set but ORT_DYLIB_PATH is not (run scripts/setup-ort.sh)");
     }
     if !ok {
-        eprintln!("skipped: ORT_DYLIB_PATH not set (see DEPS.md, onnxruntime 1.31.1)");
+        eprintln!("skipped: ORT_DYLIB_PATH not set (run scripts/setup-ort.sh, onnxruntime 1.31.1)");
     }
     ok
 }

@@ -1,5 +1,5 @@
 //! `opengs refine RUN_DIR`: keep optimising a finished run's map offline on its keyframes,
-//! and report render quality (PSNR / SSIM, METHOD §9) before and after.
+//! and report render quality (PSNR / SSIM, docs/METHOD.md §9) before and after.
 
 use std::ops::ControlFlow;
 use std::path::{Path, PathBuf};

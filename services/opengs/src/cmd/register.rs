@@ -20,7 +20,7 @@ pub enum SolverArg {
 
 #[derive(Debug, Clone, Copy, clap::ValueEnum)]
 pub enum CovarianceArg {
-    /// GS-ICP's normalised ellipse (METHOD §7).
+    /// GS-ICP's normalised ellipse (docs/METHOD.md §7).
     Ellipse,
     /// small_gicp's plane: eigenvalues (1, 1, 1e-3).
     Plane,
