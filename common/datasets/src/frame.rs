@@ -81,4 +81,9 @@ pub trait RgbdSource: Send {
     fn frame(&mut self, index: usize) -> Result<RgbdFrame, DatasetError>;
     /// Instance id → class name; empty when the dataset has no labels.
     fn class_table(&self) -> Vec<InstanceClass>;
+    /// Looks for frames a recorder appended since the source was opened (`opengs run
+    /// --live`); `len()` grows by the number returned. Sources that cannot grow find none.
+    fn refresh(&mut self) -> Result<usize, DatasetError> {
+        Ok(0)
+    }
 }

@@ -40,4 +40,9 @@ impl RgbdSource for FrameLimit {
     fn class_table(&self) -> Vec<InstanceClass> {
         self.inner.class_table()
     }
+    fn refresh(&mut self) -> Result<usize, DatasetError> {
+        let before = self.len();
+        self.inner.refresh()?;
+        Ok(self.len() - before)
+    }
 }

@@ -9,7 +9,7 @@ use opengs_geometry::{Intrinsics, Pose};
 use crate::classes::read_class_table;
 use crate::image_io::{check_exists, check_image_size, read_rgb, read_u16};
 use crate::text::{data_lines, nearest_within, parse_numbers};
-use crate::trajectory::read_tum_trajectory;
+use crate::trajectory::parse_tum_trajectory;
 use crate::{DatasetError, InstanceClass, RgbdFrame, RgbdSource};
 
 /// Depth units per metre in TUM depth PNGs.
@@ -76,13 +76,6 @@ pub struct TumSource {
     classes: Vec<InstanceClass>,
 }
 
-/// Reads a `timestamp filename` list (rgb.txt, depth.txt, labels.txt).
-fn read_file_list(dir: &Path, name: &str) -> Result<Vec<(f64, PathBuf)>, DatasetError> {
-    let path = dir.join(name);
-    let text = std::fs::read_to_string(&path).map_err(|e| DatasetError::io(&path, e))?;
-    parse_file_list(&text, dir, &path)
-}
-
 /// Parses the text of a `timestamp filename` list read from `path`, file names joined to
 /// `dir`, sorted by time.
 pub fn parse_file_list(
@@ -136,6 +129,76 @@ pub fn parse_intrinsics(text: &str, path: &Path) -> Result<Intrinsics, DatasetEr
     Ok(k)
 }
 
+/// What a TUM folder's lists say, as read at one moment.
+struct TumLists {
+    rgb: Vec<(f64, PathBuf)>,
+    depth: Vec<(f64, PathBuf)>,
+    labels: Vec<(f64, PathBuf)>,
+    gt: Vec<(f64, Pose)>,
+}
+
+impl TumLists {
+    /// Reads the lists; `growing` ignores a last line without its newline (a recorder is
+    /// still writing it).
+    fn read(dir: &Path, growing: bool) -> Result<Self, DatasetError> {
+        // rgb.txt and depth.txt must be there; labels and ground truth are optional.
+        let text = |name: &str| -> Result<Option<String>, DatasetError> {
+            let path = dir.join(name);
+            let required = matches!(name, "rgb.txt" | "depth.txt");
+            match std::fs::read_to_string(&path) {
+                Ok(t) if growing => Ok(Some(complete_lines(&t).to_string())),
+                Ok(t) => Ok(Some(t)),
+                Err(e) if e.kind() == std::io::ErrorKind::NotFound && !required => Ok(None),
+                Err(e) => Err(DatasetError::io(&path, e)),
+            }
+        };
+        let list = |name: &str| -> Result<Vec<(f64, PathBuf)>, DatasetError> {
+            match text(name)? {
+                Some(t) => parse_file_list(&t, dir, &dir.join(name)),
+                None => Ok(Vec::new()),
+            }
+        };
+        let gt_file = dir.join("groundtruth.txt");
+        Ok(Self {
+            rgb: list("rgb.txt")?,
+            depth: list("depth.txt")?,
+            labels: list("labels.txt")?,
+            gt: match text("groundtruth.txt")? {
+                Some(t) => parse_tum_trajectory(&t, &gt_file)?,
+                None => Vec::new(),
+            },
+        })
+    }
+
+    /// Colour frames after `after` (seconds) with a depth frame within `max_dt`, each with
+    /// its labels and ground truth when there are some.
+    fn associate(&self, max_dt: f64, after: f64) -> Vec<TumEntry> {
+        let depth_times: Vec<f64> = self.depth.iter().map(|(t, _)| *t).collect();
+        let label_times: Vec<f64> = self.labels.iter().map(|(t, _)| *t).collect();
+        let gt_times: Vec<f64> = self.gt.iter().map(|(t, _)| *t).collect();
+        self.rgb
+            .iter()
+            .filter(|(t, _)| *t > after)
+            .filter_map(|(t, rgb)| {
+                let d = nearest_within(&depth_times, *t, max_dt)?;
+                Some(TumEntry {
+                    timestamp: *t,
+                    rgb: rgb.clone(),
+                    depth: self.depth[d].1.clone(),
+                    labels: nearest_within(&label_times, *t, max_dt)
+                        .map(|i| self.labels[i].1.clone()),
+                    gt_pose: nearest_within(&gt_times, *t, max_dt).map(|i| self.gt[i].1),
+                })
+            })
+            .collect()
+    }
+}
+
+/// `text` up to and including its last newline.
+fn complete_lines(text: &str) -> &str {
+    text.rfind('\n').map_or("", |i| &text[..=i])
+}
+
 impl TumSource {
     pub fn open(dir: &Path, options: TumOptions) -> Result<Self, DatasetError> {
         if !dir.is_dir() {
@@ -149,9 +212,8 @@ impl TumSource {
             None if intrinsics_file.exists() => read_intrinsics_file(&intrinsics_file)?,
             None => tum_intrinsics_for(dir),
         };
-        let rgb = read_file_list(dir, "rgb.txt")?;
-        let depth = read_file_list(dir, "depth.txt")?;
-        for (name, list) in [("rgb.txt", &rgb), ("depth.txt", &depth)] {
+        let lists = TumLists::read(dir, false)?;
+        for (name, list) in [("rgb.txt", &lists.rgb), ("depth.txt", &lists.depth)] {
             if list.is_empty() {
                 return Err(DatasetError::invalid(
                     &dir.join(name),
@@ -159,15 +221,6 @@ impl TumSource {
                 ));
             }
         }
-        let labels = match dir.join("labels.txt").exists() {
-            true => read_file_list(dir, "labels.txt")?,
-            false => Vec::new(),
-        };
-        let gt_file = dir.join("groundtruth.txt");
-        let gt = match gt_file.exists() {
-            true => read_tum_trajectory(&gt_file)?,
-            false => Vec::new(),
-        };
         let classes_file = dir.join("classes.json");
         let classes = match classes_file.exists() {
             true => read_class_table(&classes_file)?,
@@ -175,22 +228,7 @@ impl TumSource {
         };
 
         let max_dt = options.max_time_diff;
-        let depth_times: Vec<f64> = depth.iter().map(|(t, _)| *t).collect();
-        let label_times: Vec<f64> = labels.iter().map(|(t, _)| *t).collect();
-        let gt_times: Vec<f64> = gt.iter().map(|(t, _)| *t).collect();
-        let entries: Vec<TumEntry> = rgb
-            .into_iter()
-            .filter_map(|(t, rgb)| {
-                let d = nearest_within(&depth_times, t, max_dt)?;
-                Some(TumEntry {
-                    timestamp: t,
-                    rgb,
-                    depth: depth[d].1.clone(),
-                    labels: nearest_within(&label_times, t, max_dt).map(|i| labels[i].1.clone()),
-                    gt_pose: nearest_within(&gt_times, t, max_dt).map(|i| gt[i].1),
-                })
-            })
-            .collect();
+        let entries = lists.associate(max_dt, f64::NEG_INFINITY);
         if entries.is_empty() {
             return Err(DatasetError::invalid(
                 &dir.join("rgb.txt"),
@@ -199,11 +237,7 @@ impl TumSource {
         }
         // A missing image found now fails before any stage starts, not mid-run.
         for e in &entries {
-            check_exists(&e.rgb, "rgb.txt")?;
-            check_exists(&e.depth, "depth.txt")?;
-            if let Some(l) = &e.labels {
-                check_exists(l, "labels.txt")?;
-            }
+            check_entry_files(e)?;
         }
         let camera = match (options.intrinsics.is_some(), intrinsics_file.exists()) {
             (true, _) => "the camera given",
@@ -219,6 +253,16 @@ impl TumSource {
             classes,
         })
     }
+}
+
+/// Every file an entry names exists.
+fn check_entry_files(e: &TumEntry) -> Result<(), DatasetError> {
+    check_exists(&e.rgb, "rgb.txt")?;
+    check_exists(&e.depth, "depth.txt")?;
+    if let Some(l) = &e.labels {
+        check_exists(l, "labels.txt")?;
+    }
+    Ok(())
 }
 
 impl RgbdSource for TumSource {
@@ -263,6 +307,27 @@ impl RgbdSource for TumSource {
 
     fn class_table(&self) -> Vec<InstanceClass> {
         self.classes.clone()
+    }
+
+    /// A recorder appends a frame by writing its images first, then a line to rgb.txt and
+    /// depth.txt. A colour frame is taken once a depth frame at or after its time is
+    /// listed (so its nearest depth frame is known) and its files exist; frames are
+    /// taken in time order, so one not yet complete holds back the ones after it.
+    fn refresh(&mut self) -> Result<usize, DatasetError> {
+        let last = self
+            .entries
+            .last()
+            .map_or(f64::NEG_INFINITY, |e| e.timestamp);
+        let lists = TumLists::read(&self.dir, true)?;
+        let newest_depth = lists.depth.last().map_or(f64::NEG_INFINITY, |(t, _)| *t);
+        let before = self.entries.len();
+        for e in lists.associate(self.options.max_time_diff, last) {
+            if e.timestamp > newest_depth || check_entry_files(&e).is_err() {
+                break;
+            }
+            self.entries.push(e);
+        }
+        Ok(self.entries.len() - before)
     }
 }
 
