@@ -30,6 +30,14 @@ pub enum DatasetError {
     },
     #[error("{path}: {message}")]
     Invalid { path: PathBuf, message: String },
+    /// A message of a ROS 2 bag: the bag file, the topic and the message's index in it.
+    #[error("{path}: topic {topic}, message {index}: {message}")]
+    BagMessage {
+        path: PathBuf,
+        topic: String,
+        index: usize,
+        message: String,
+    },
     #[error("frame {index} out of range (dataset has {len} frames)")]
     OutOfRange { index: usize, len: usize },
     #[error("{0}")]

@@ -1,9 +1,11 @@
-//! Which dataset to open: parsed from `synthetic`, `tum:DIR`, `replica:DIR`.
+//! Which dataset to open: parsed from `synthetic`, `tum:DIR`, `replica:DIR`,
+//! `rosbag2:PATH`.
 
 use std::path::PathBuf;
 use std::str::FromStr;
 
 use crate::replica::ReplicaOptions;
+use crate::rosbag2::Rosbag2Options;
 use crate::synthetic::SyntheticOptions;
 use crate::tum::TumOptions;
 use crate::DatasetError;
@@ -14,6 +16,8 @@ pub enum DatasetKind {
     Synthetic,
     Tum(PathBuf),
     Replica(PathBuf),
+    /// A ROS 2 bag: its directory (metadata.yaml + .mcap files) or one .mcap file.
+    Rosbag2(PathBuf),
 }
 
 impl FromStr for DatasetKind {
@@ -21,10 +25,11 @@ impl FromStr for DatasetKind {
 
     fn from_str(s: &str) -> Result<Self, Self::Err> {
         let s = s.trim();
-        let dir = |rest: &str, kind: &str| {
+        let dir = |rest: &str, kind: &str, what: &str| {
             if rest.is_empty() {
                 Err(DatasetError::Spec(format!(
-                    "dataset '{s}': missing directory, write {kind}:DIR"
+                    "dataset '{s}': missing {}, write {kind}:{what}",
+                    if what == "DIR" { "directory" } else { "path" }
                 )))
             } else {
                 Ok(PathBuf::from(rest))
@@ -35,13 +40,17 @@ impl FromStr for DatasetKind {
         }
         match s.split_once(':') {
             Some((kind, rest)) if kind.eq_ignore_ascii_case("tum") => {
-                Ok(Self::Tum(dir(rest, "tum")?))
+                Ok(Self::Tum(dir(rest, "tum", "DIR")?))
             }
             Some((kind, rest)) if kind.eq_ignore_ascii_case("replica") => {
-                Ok(Self::Replica(dir(rest, "replica")?))
+                Ok(Self::Replica(dir(rest, "replica", "DIR")?))
+            }
+            Some((kind, rest)) if kind.eq_ignore_ascii_case("rosbag2") => {
+                Ok(Self::Rosbag2(dir(rest, "rosbag2", "PATH")?))
             }
             _ => Err(DatasetError::Spec(format!(
-                "unknown dataset '{s}': expected 'synthetic', 'tum:DIR' or 'replica:DIR'"
+                "unknown dataset '{s}': expected 'synthetic', 'tum:DIR', 'replica:DIR' or \
+                 'rosbag2:PATH' (a ROS 2 bag directory or .mcap file)"
             ))),
         }
     }
@@ -53,6 +62,7 @@ impl std::fmt::Display for DatasetKind {
             Self::Synthetic => write!(f, "synthetic"),
             Self::Tum(d) => write!(f, "tum:{}", d.display()),
             Self::Replica(d) => write!(f, "replica:{}", d.display()),
+            Self::Rosbag2(p) => write!(f, "rosbag2:{}", p.display()),
         }
     }
 }
@@ -66,6 +76,7 @@ pub struct DatasetSpec {
     pub synthetic: SyntheticOptions,
     pub tum: TumOptions,
     pub replica: ReplicaOptions,
+    pub rosbag2: Rosbag2Options,
 }
 
 impl DatasetSpec {
@@ -110,8 +121,16 @@ mod tests {
             "replica:room0".parse::<DatasetKind>().ok(),
             Some(DatasetKind::Replica("room0".into()))
         );
-        let kind = DatasetKind::Tum("a/b".into());
-        assert_eq!(kind.to_string().parse::<DatasetKind>().ok(), Some(kind));
+        assert_eq!(
+            "rosbag2:/bags/run_1".parse::<DatasetKind>().ok(),
+            Some(DatasetKind::Rosbag2("/bags/run_1".into()))
+        );
+        for kind in [
+            DatasetKind::Tum("a/b".into()),
+            DatasetKind::Rosbag2("c/d_0.mcap".into()),
+        ] {
+            assert_eq!(kind.to_string().parse::<DatasetKind>().ok(), Some(kind));
+        }
     }
 
     #[test]
@@ -121,12 +140,24 @@ mod tests {
             .err()
             .map(|e| e.to_string())
             .unwrap_or_default();
-        assert!(e.contains("tum:DIR") && e.contains("kitti"), "{e}");
+        assert!(
+            e.contains("tum:DIR") && e.contains("rosbag2:PATH") && e.contains("kitti"),
+            "{e}"
+        );
         let e = "tum:"
             .parse::<DatasetKind>()
             .err()
             .map(|e| e.to_string())
             .unwrap_or_default();
         assert!(e.contains("missing directory"), "{e}");
+        let e = "rosbag2:"
+            .parse::<DatasetKind>()
+            .err()
+            .map(|e| e.to_string())
+            .unwrap_or_default();
+        assert!(
+            e.contains("missing path") && e.contains("rosbag2:PATH"),
+            "{e}"
+        );
     }
 }

@@ -1,5 +1,5 @@
-//! Writes any source to disk in TUM or Replica layout (what `opengs synth`
-//! uses), so the readers of this crate load it back unchanged.
+//! Writes any source to disk in TUM or Replica layout, or as a ROS 2 bag (what `opengs
+//! synth` uses), so the readers of this crate load it back unchanged.
 
 use std::path::Path;
 use std::str::FromStr;
@@ -11,6 +11,7 @@ use crate::image_io::{write_rgb_jpeg, write_rgb_png, write_u16_png};
 use crate::replica::{
     depth_path, frame_path, label_path, CamParams, CameraParams, REPLICA_DEPTH_SCALE,
 };
+use crate::rosbag2_writer::{write_rosbag2, ChunkCompression};
 use crate::trajectory::format_tum_line;
 use crate::tum::TUM_DEPTH_SCALE;
 use crate::{DatasetError, RgbdFrame, RgbdSource};
@@ -24,6 +25,8 @@ const BATCH: usize = 8;
 pub enum DatasetFormat {
     Tum,
     Replica,
+    /// A ROS 2 bag directory (metadata.yaml + one MCAP file).
+    Rosbag2,
 }
 
 impl FromStr for DatasetFormat {
@@ -32,8 +35,9 @@ impl FromStr for DatasetFormat {
         match s.to_ascii_lowercase().as_str() {
             "tum" => Ok(Self::Tum),
             "replica" => Ok(Self::Replica),
+            "rosbag2" => Ok(Self::Rosbag2),
             _ => Err(DatasetError::Spec(format!(
-                "unknown dataset format '{s}': expected 'tum' or 'replica'"
+                "unknown dataset format '{s}': expected 'tum', 'replica' or 'rosbag2'"
             ))),
         }
     }
@@ -44,12 +48,13 @@ impl std::fmt::Display for DatasetFormat {
         f.write_str(match self {
             Self::Tum => "tum",
             Self::Replica => "replica",
+            Self::Rosbag2 => "rosbag2",
         })
     }
 }
 
 /// Converts depth units; values that no longer fit become missing (0).
-fn rescale_depth(depth: &[u16], from: f32, to: f32) -> Vec<u16> {
+pub(crate) fn rescale_depth(depth: &[u16], from: f32, to: f32) -> Vec<u16> {
     if from == to {
         return depth.to_vec();
     }
@@ -86,6 +91,9 @@ pub fn write_dataset(
     let total = source.len();
     let k = source.intrinsics();
     match format {
+        DatasetFormat::Rosbag2 => {
+            return write_rosbag2(source, out, ChunkCompression::Zstd, progress)
+        }
         DatasetFormat::Tum => {
             for sub in ["rgb", "depth", "labels"] {
                 create_dir(&out.join(sub))?;
@@ -130,6 +138,7 @@ pub fn write_dataset(
             .map(|f| match format {
                 DatasetFormat::Tum => write_tum_frame(out, f),
                 DatasetFormat::Replica => write_replica_frame(out, f),
+                DatasetFormat::Rosbag2 => Ok(()),
             })
             .collect::<Result<Vec<()>, _>>()?;
         for f in &batch {
@@ -237,6 +246,8 @@ impl IndexLines {
                 self.traj.push_str(&row.join(" "));
                 self.traj.push('\n');
             }
+            // Written by `write_rosbag2`, not through index files.
+            DatasetFormat::Rosbag2 => {}
         }
         Ok(())
     }
@@ -264,6 +275,7 @@ impl IndexLines {
                 )
             }
             DatasetFormat::Replica => write_text(&out.join("traj.txt"), &self.traj),
+            DatasetFormat::Rosbag2 => Ok(()),
         }
     }
 }

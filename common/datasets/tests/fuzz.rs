@@ -2,7 +2,10 @@
 //! `rgb.txt` / `depth.txt` / `labels.txt` ([`parse_file_list`]), `groundtruth.txt`
 //! ([`parse_tum_trajectory`]), `intrinsics.txt` ([`parse_intrinsics`]); Replica `traj.txt`
 //! ([`parse_replica_trajectory`]) and `cam_params.json` ([`parse_cam_params`]). Each parses
-//! the text its file reader reads, so no files are written.
+//! the text its file reader reads, so no files are written. And the ROS 2 bag reader
+//! ([`Rosbag2Source`]): a small valid MCAP bag with its bytes mutated (flips, extreme
+//! lengths and sizes, cuts, insertions, other encoding strings), written to a scratch file
+//! and opened, every frame read; it must answer Ok or Err, never panic or hang.
 //!
 //! Inputs: valid files mutated at line, token and character level (extreme and malformed
 //! numbers, comments, truncation, stray bytes), and random text. Properties: no parser panics
@@ -20,7 +23,11 @@ use nalgebra::{UnitQuaternion, Vector3};
 use opengs_datasets::replica::{parse_cam_params, parse_replica_trajectory};
 use opengs_datasets::trajectory::parse_tum_trajectory;
 use opengs_datasets::tum::{parse_file_list, parse_intrinsics};
-use opengs_datasets::DatasetError;
+use opengs_datasets::{
+    write_rosbag2, ChunkCompression, DatasetError, InstanceClass, RgbdFrame, RgbdSource,
+    Rosbag2Options, Rosbag2Source,
+};
+use opengs_geometry::Intrinsics;
 use rand::Rng;
 
 #[path = "../../../ipc_schema/tests/support/fuzz_driver.rs"]
@@ -538,4 +545,161 @@ fn fuzz_replica_cam_params() {
         "replica::parse_cam_params (cam_params.json)",
         cam_params_case,
     );
+}
+
+// ---- ROS 2 bags ----
+
+/// Three 8x6 frames with ground truth: a small valid bag.
+struct TinySource;
+
+impl RgbdSource for TinySource {
+    fn name(&self) -> String {
+        "tiny".into()
+    }
+    fn intrinsics(&self) -> Intrinsics {
+        Intrinsics::new(6.0, 6.5, 3.5, 2.5, 8, 6)
+    }
+    fn len(&self) -> usize {
+        3
+    }
+    fn frame_rate(&self) -> f64 {
+        30.0
+    }
+    fn frame(&mut self, index: usize) -> Result<RgbdFrame, DatasetError> {
+        Ok(RgbdFrame {
+            index,
+            timestamp: 1.0 + index as f64 / 30.0,
+            width: 8,
+            height: 6,
+            rgb: (0..144).map(|i| (i * 7 + index) as u8).collect(),
+            depth: (0..48).map(|i| (i * 100 + index) as u16).collect(),
+            depth_scale: 1000.0,
+            gt_pose: Some(opengs_geometry::Pose::translation(index as f64, 0.5, -1.0)),
+            labels: None,
+        })
+    }
+    fn class_table(&self) -> Vec<InstanceClass> {
+        Vec::new()
+    }
+}
+
+/// The bytes of TinySource's bag (uncompressed chunks, so mutations reach the messages),
+/// and a scratch directory the mutated bags are written to.
+fn valid_bag() -> &'static (Vec<u8>, tempfile::TempDir) {
+    static BAG: std::sync::OnceLock<(Vec<u8>, tempfile::TempDir)> = std::sync::OnceLock::new();
+    BAG.get_or_init(|| {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let bag = dir.path().join("tiny");
+        write_rosbag2(
+            &mut TinySource,
+            &bag,
+            ChunkCompression::None,
+            &mut |_, _| {},
+        )
+        .expect("tiny bag");
+        let bytes = std::fs::read(bag.join("tiny_0.mcap")).expect("read bag");
+        (bytes, dir)
+    })
+}
+
+const EXTREME_U64: [u64; 8] = [0, 1, 9, 255, u32::MAX as u64, 1 << 40, 1 << 63, u64::MAX];
+const EXTREME_U32: [u32; 8] = [0, 1, 3, 7, 8, 0x8000_0000, 0xffff_fff0, u32::MAX];
+const ENCODINGS: [&str; 10] = [
+    "rgb8",
+    "bgr8",
+    "rgba8",
+    "bgra8",
+    "mono8",
+    "16UC1",
+    "32FC1",
+    "yuv422",
+    "",
+    "16UC1\0junk",
+];
+
+fn mutate_bytes(rng: &mut R, b: &mut Vec<u8>) {
+    let n = b.len();
+    if n == 0 {
+        b.extend((0..rng.gen_range(0..64)).map(|_| rng.gen::<u8>()));
+        return;
+    }
+    let at = rng.gen_range(0..n);
+    match rng.gen_range(0..9) {
+        0 => {
+            for _ in 0..rng.gen_range(1..8) {
+                let i = rng.gen_range(0..n);
+                b[i] ^= 1 << rng.gen_range(0..8);
+            }
+        }
+        1 => b[at] = pick(rng, &[0u8, 0xff, 0x7f, 0x80, 1]),
+        2 if at + 8 <= n => b[at..at + 8].copy_from_slice(&pick(rng, &EXTREME_U64).to_le_bytes()),
+        3 if at + 4 <= n => b[at..at + 4].copy_from_slice(&pick(rng, &EXTREME_U32).to_le_bytes()),
+        4 => b.truncate(at),
+        5 => {
+            let end = (at + rng.gen_range(1..64)).min(n);
+            b.drain(at..end);
+        }
+        6 => {
+            let end = (at + rng.gen_range(1..64)).min(n);
+            let copy = b[at..end].to_vec();
+            let to = rng.gen_range(0..=n);
+            b.splice(to..to, copy);
+        }
+        7 => {
+            let from = pick(rng, &["rgb8", "16UC1"]);
+            let to = pick(rng, &ENCODINGS);
+            if let Some(i) = b.windows(from.len()).position(|w| w == from.as_bytes()) {
+                b.splice(i..i + from.len(), to.bytes());
+            }
+        }
+        _ => {
+            let i = rng.gen_range(0..n);
+            b[i] = rng.gen();
+        }
+    }
+}
+
+/// A mutated tiny bag opened and every frame read: Ok or Err, never a panic; what is
+/// accepted has buffers of the camera's size.
+fn rosbag2_case(rng: &mut R) -> bool {
+    let (valid, dir) = valid_bag();
+    let mut bytes = valid.clone();
+    for _ in 0..rng.gen_range(1..=3) {
+        mutate_bytes(rng, &mut bytes);
+    }
+    let path = dir.path().join("fuzz.mcap");
+    std::fs::write(&path, &bytes).expect("scratch file");
+    let Ok(mut src) = Rosbag2Source::open(&path, Rosbag2Options::default()) else {
+        return false;
+    };
+    let k = src.intrinsics();
+    assert!(k.validate().is_ok(), "{k:?}");
+    for i in 0..src.len() {
+        if let Ok(f) = src.frame(i) {
+            assert!(
+                f.check_buffers(&k).is_ok(),
+                "frame {i}: {:?}",
+                f.check_buffers(&k)
+            );
+            assert!(f.timestamp.is_finite());
+        }
+    }
+    true
+}
+
+#[test]
+fn the_tiny_bag_reads_back() {
+    let (valid, dir) = valid_bag();
+    let path = dir.path().join("valid.mcap");
+    std::fs::write(&path, valid).expect("write");
+    let mut src = Rosbag2Source::open(&path, Rosbag2Options::default()).expect("valid bag");
+    assert_eq!(src.len(), 3);
+    let f = src.frame(2).expect("frame");
+    let want = TinySource.frame(2).expect("frame");
+    assert_eq!((f.rgb, f.depth), (want.rgb, want.depth));
+}
+
+#[test]
+fn fuzz_rosbag2() {
+    fuzz("rosbag2::Rosbag2Source (MCAP bag bytes)", rosbag2_case);
 }
