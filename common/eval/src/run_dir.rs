@@ -67,6 +67,12 @@ impl RunDir {
         self.file("lost.txt")
     }
 
+    /// The mapper's keyframes (images, camera, pose), journalled as they arrive so a
+    /// restarted mapper optimises against all of them (the pipeline's `keyframe_journal`).
+    pub fn mapper_keyframes(&self) -> PathBuf {
+        self.file("mapper_keyframes")
+    }
+
     /// Keyframe sequence numbers, one per line, appended as the mapper adds them (the
     /// held-out frames of the semantic scoring).
     pub fn keyframes(&self) -> PathBuf {

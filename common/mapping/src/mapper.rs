@@ -102,6 +102,12 @@ impl Mapper {
         near.len() + holes
     }
 
+    /// A keyframe of a resumed map (a restarted mapper's journal): a training target again;
+    /// its Gaussians are in the map already, so nothing is added.
+    pub fn restore_keyframe(&mut self, keyframe: StoredKeyframe) {
+        self.keyframes.push(keyframe);
+    }
+
     /// Gaussians where the map rendered at `camera` (the keyframe's) leaves its depth open;
     /// returns how many were added. The caller resizes the optimiser state.
     fn fill_holes(&mut self, input: &DensifyInput, camera: &Camera) -> usize {

@@ -29,6 +29,8 @@ use opengs_splat::{read_ply_file, write_ply_file, Camera, GaussianMap};
 
 use opengs_runtime::finish_requested_flag;
 
+use crate::keyframe_journal::{read_journal, JournalKeyframe, KeyframeJournal};
+
 /// The mapper's flags that `opengs run` sets ([`crate::run_options::StageFlags`]); one struct for
 /// parsing and for writing them.
 #[derive(clap::Args, Debug, Clone, Default, PartialEq)]
@@ -204,6 +206,10 @@ struct MapperStage {
     out_dir: PathBuf,
     /// Full-resolution keyframes for the final optimisation (only when it is asked for).
     kept: Option<KeptKeyframes>,
+    /// Every keyframe on disk, for a restart (none when the journal cannot be written).
+    journal: Option<KeyframeJournal>,
+    /// Keyframes this process got back from the journal (counted in `resumed` already).
+    restored: usize,
 }
 
 impl MapperStage {
@@ -242,6 +248,16 @@ impl MapperStage {
             self.cameras.pop_front();
         }
         self.record_keyframe(h.stamp.seq);
+        if let Some(journal) = &self.journal {
+            journal.append(JournalKeyframe {
+                seq: h.stamp.seq,
+                pose,
+                intrinsics: k,
+                depth_scale: h.depth_scale,
+                rgb: view.rgb.to_vec(),
+                depth: view.depth.to_vec(),
+            });
+        }
         if let Some(kept) = self.kept.as_mut() {
             let pushed = kept.push(h.stamp.seq, pose, k, view.rgb, view.depth, h.depth_scale);
             if let Err(e) = pushed {
@@ -408,8 +424,48 @@ impl MapperStage {
 
     /// Counters of the whole run: those of the checkpoint resumed from, plus this process's.
     fn counters(&self) -> MapperCounters {
-        self.resumed
-            .plus(self.mapper.keyframes(), self.mapper.iterations())
+        self.resumed.plus(
+            self.mapper.keyframes() - self.restored,
+            self.mapper.iterations(),
+        )
+    }
+
+    /// A restarted mapper takes its journalled keyframes back: training targets, cameras
+    /// for the consensus renders, and the final optimisation's keyframes.
+    fn restore_keyframes(&mut self, journal: Vec<JournalKeyframe>) {
+        for kf in journal {
+            let stored = StoredKeyframe::new(
+                kf.seq,
+                kf.pose,
+                kf.intrinsics,
+                &kf.rgb,
+                &kf.depth,
+                kf.depth_scale,
+                self.mapper.config(),
+            );
+            self.mapper.restore_keyframe(stored);
+            self.cameras.push_back((
+                kf.seq,
+                Camera::from_pose(kf.intrinsics, &kf.pose, self.mapper.config().near),
+            ));
+            while self.cameras.len() > KEPT_CAMERAS {
+                self.cameras.pop_front();
+            }
+            if let Some(kept) = self.kept.as_mut() {
+                let pushed = kept.push(
+                    kf.seq,
+                    kf.pose,
+                    kf.intrinsics,
+                    &kf.rgb,
+                    &kf.depth,
+                    kf.depth_scale,
+                );
+                if let Err(e) = pushed {
+                    tracing::warn!("{e}");
+                }
+            }
+            self.restored += 1;
+        }
     }
 }
 
@@ -462,6 +518,27 @@ pub fn run_mapper(ctx: &RunContext, out_dir: &Path, args: &MapperArgs) -> anyhow
         consensus_applied: 0,
         out_dir: out_dir.to_path_buf(),
         kept: (args.run.finish_steps > 0).then(|| KeptKeyframes::new(args.finish_keyframes)),
+        journal: None,
+        restored: 0,
+    };
+    if resumed.restarts > 0 {
+        stage.restore_keyframes(read_journal(&run.mapper_keyframes()));
+        tracing::warn!(
+            "restarted: {} of {} keyframes back from {}",
+            stage.restored,
+            resumed.keyframes,
+            run.mapper_keyframes().display()
+        );
+    }
+    stage.journal = match KeyframeJournal::start(&run.mapper_keyframes()) {
+        Ok(j) => Some(j),
+        Err(e) => {
+            tracing::warn!(
+                "{}: {e}; a restarted mapper would lose its keyframes",
+                run.mapper_keyframes().display()
+            );
+            None
+        }
     };
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(args.threads.max(1))
@@ -560,6 +637,9 @@ pub fn run_mapper(ctx: &RunContext, out_dir: &Path, args: &MapperArgs) -> anyhow
         );
     }
     checkpointer.join();
+    if let Some(journal) = stage.journal.as_mut() {
+        journal.finish();
+    }
     let mapping_seconds = started.elapsed().as_secs_f64();
     let counters = stage.counters();
     let finishing = ended_by_finish && stage.kept.is_some();

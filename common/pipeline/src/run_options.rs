@@ -26,6 +26,9 @@ pub struct RunOptions {
     /// At the end of the data, let stages with a `finish_timeout_s` do their final work
     /// (else every stage is stopped at once).
     pub finish_after_data: bool,
+    /// No end of data: the sensor waits for frames a recorder appends until the run is
+    /// stopped (`opengs ctl stop`, SIGTERM).
+    pub live: bool,
 }
 
 /// Flags a run sets on individual stages, each typed by the stage's own argument struct.

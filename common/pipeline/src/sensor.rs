@@ -23,6 +23,21 @@ pub struct SensorArgs {
     /// First frame to publish (a restarted sensor resumes where it stopped).
     #[arg(long, default_value_t = 0)]
     pub start_frame: usize,
+    /// No end of data: after the last frame, wait for frames a recorder appends to the
+    /// dataset (a TUM folder's rgb.txt/depth.txt) until stopped.
+    #[arg(long)]
+    pub live: bool,
+}
+
+/// How often a live sensor with nothing to publish looks for appended frames.
+const LIVE_POLL: Duration = Duration::from_millis(200);
+
+/// What one attempt to publish did.
+enum Step {
+    Published,
+    /// Live, at the end of what was recorded so far.
+    Waiting,
+    EndOfData,
 }
 
 /// Writes one frame into a loaned sample and sends it; returns its stamp.
@@ -60,7 +75,7 @@ pub fn run_sensor(ctx: &RunContext, args: &SensorArgs) -> anyhow::Result<()> {
     let mut source = open_dataset(&args.dataset.spec()?)?;
     let k = source.intrinsics();
     let total = source.len();
-    if args.start_frame >= total && total > 0 {
+    if args.start_frame >= total && total > 0 && !args.live {
         tracing::info!(
             "start frame {} is past the last frame {}; nothing to do",
             args.start_frame,
@@ -83,15 +98,34 @@ pub fn run_sensor(ctx: &RunContext, args: &SensorArgs) -> anyhow::Result<()> {
     let _tick = ws
         .attach_interval(period)
         .map_err(|e| anyhow::anyhow!("WaitSet interval: {e:?}"))?;
-    tracing::info!("{}: {total} frames, {k:?}, rate {rate:?}", source.name());
+    tracing::info!(
+        "{}: {total} frames{}, {k:?}, rate {rate:?}",
+        source.name(),
+        if args.live { " so far (live)" } else { "" }
+    );
     telemetry.ready();
 
     let mut index = args.start_frame;
     let mut last = Stamp::new(MessageKind::Frame, 0, 0, 0);
     let mut failure: Option<anyhow::Error> = None;
-    let mut publish_next = |last: &mut Stamp| -> Result<bool, anyhow::Error> {
-        if index >= total {
-            return Ok(false);
+    let mut last_poll: Option<std::time::Instant> = None;
+    let mut publish_next = |last: &mut Stamp| -> Result<Step, anyhow::Error> {
+        if index >= source.len() {
+            if !args.live {
+                return Ok(Step::EndOfData);
+            }
+            telemetry.alive();
+            if last_poll.is_some_and(|t| t.elapsed() < LIVE_POLL) {
+                return Ok(Step::Waiting);
+            }
+            last_poll = Some(std::time::Instant::now());
+            let added = source
+                .refresh()
+                .map_err(|e| crate::stage_main::BadInput(format!("{}: {e}", source.name())))?;
+            if added == 0 || index >= source.len() {
+                return Ok(Step::Waiting);
+            }
+            tracing::info!("sensor: {added} new frames recorded");
         }
         let start = now_ns();
         let frame = source
@@ -103,12 +137,15 @@ pub fn run_sensor(ctx: &RunContext, args: &SensorArgs) -> anyhow::Result<()> {
         telemetry.processed(&input, start, now_ns());
         *last = stamp;
         index += 1;
-        Ok(index < total)
+        Ok(match args.live || index < source.len() {
+            true => Step::Published,
+            false => Step::EndOfData,
+        })
     };
     let result = if rate.is_some() {
         ws.wait_and_process(|_| match publish_next(&mut last) {
-            Ok(true) => CallbackProgression::Continue,
-            Ok(false) => CallbackProgression::Stop,
+            Ok(Step::Published | Step::Waiting) => CallbackProgression::Continue,
+            Ok(Step::EndOfData) => CallbackProgression::Stop,
             Err(e) => {
                 failure = Some(e);
                 CallbackProgression::Stop
@@ -116,19 +153,19 @@ pub fn run_sensor(ctx: &RunContext, args: &SensorArgs) -> anyhow::Result<()> {
         })
     } else {
         loop {
+            // While waiting for a recorder, sleep in the WaitSet rather than spin.
+            let mut pause = Duration::ZERO;
             match publish_next(&mut last) {
-                Ok(true) => {}
-                Ok(false) => break Ok(WaitSetRunResult::StopRequest),
+                Ok(Step::Published) => {}
+                Ok(Step::Waiting) => pause = LIVE_POLL / 4,
+                Ok(Step::EndOfData) => break Ok(WaitSetRunResult::StopRequest),
                 Err(e) => {
                     failure = Some(e);
                     break Ok(WaitSetRunResult::StopRequest);
                 }
             }
-            // Zero timeout: returns at once, reporting a pending SIGINT/SIGTERM.
-            match ws.wait_and_process_once_with_timeout(
-                |_| CallbackProgression::Continue,
-                Duration::ZERO,
-            ) {
+            // Returns at once (or after the pause), reporting a pending SIGINT/SIGTERM.
+            match ws.wait_and_process_once_with_timeout(|_| CallbackProgression::Continue, pause) {
                 Ok(WaitSetRunResult::TerminationRequest) | Ok(WaitSetRunResult::Interrupt) => {
                     break Ok(WaitSetRunResult::TerminationRequest)
                 }

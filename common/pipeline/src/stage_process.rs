@@ -122,6 +122,10 @@ impl StageProcess {
             .stderr(log_err)
             // Own process group: Ctrl-C reaches the supervisor, which stops stages in order.
             .process_group(0);
+        // Only the supervisor speaks to systemd for the service.
+        for var in crate::service_notify::SERVICE_ENV {
+            cmd.env_remove(var);
+        }
         let cpus = self.spec.cpus.clone();
         let nice = self.spec.nice;
         let policy = self.spec.scheduler.policy();

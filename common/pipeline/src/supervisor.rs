@@ -24,6 +24,7 @@ use crate::progress::Progress;
 use crate::recorder::Recorder;
 use crate::run_options::{RunOptions, StageFlags};
 use crate::run_record::StageRecord;
+use crate::service_notify::ServiceNotifier;
 use crate::stage_process::{StageProcess, StageState};
 use crate::status::{PipelineStatus, StageStatus};
 use crate::swap::{Swap, SwapOutcome, SwapStep};
@@ -95,12 +96,16 @@ impl Supervisor {
             run_dir.map_checkpoint_counters(),
             run_dir.label_table(),
             run_dir.consensus_progress(),
+            run_dir.mapper_keyframes(),
         ] {
-            if stale.exists() {
-                std::fs::remove_file(&stale).map_err(|e| {
-                    anyhow::anyhow!("cannot remove an earlier run's {}: {e}", stale.display())
-                })?;
-            }
+            let removed = match stale.is_dir() {
+                true => std::fs::remove_dir_all(&stale),
+                false if stale.exists() => std::fs::remove_file(&stale),
+                false => Ok(()),
+            };
+            removed.map_err(|e| {
+                anyhow::anyhow!("cannot remove an earlier run's {}: {e}", stale.display())
+            })?;
         }
         let ctx = RunContext::new(&opts.run_id)?;
         ctx.cleanup_dead_nodes();
@@ -124,9 +129,15 @@ impl Supervisor {
             };
             let result = state
                 .start_all(&ch)
-                .and_then(|()| state.main_loop(&ctx, &ch, started))
+                .and_then(|()| {
+                    let status = state.service_status();
+                    state.service.ready(&status);
+                    state.main_loop(&ctx, &ch, started)
+                })
                 .and_then(|ending| {
                     streaming_s = Some(started.elapsed().as_secs_f64());
+                    let status = format!("stopping ({ending:?}): {}", state.service_status());
+                    state.service.stopping(&status);
                     match ending {
                         Ending::EndOfData if opts.finish_after_data => {
                             state.finish_stages(&ch, started)
@@ -184,6 +195,8 @@ struct RunState {
     /// The dataset selection, for the run record the snapshots write.
     dataset: crate::DatasetArgs,
     last_snapshot: Instant,
+    /// systemd readiness, status and watchdog (nothing when not run by systemd).
+    service: ServiceNotifier,
 }
 
 /// How often the run's files are rewritten while it runs, so a supervisor killed outright
@@ -197,10 +210,15 @@ impl RunState {
         if let Some(r) = opts.max_rate {
             source_args.extend(["--max-rate".into(), r.to_string()]);
         }
+        if opts.live {
+            source_args.push("--live".into());
+        }
+        // A live dataset grows: no total to count down to.
         let total_frames = opts
             .dataset
             .spec()
             .ok()
+            .filter(|_| !opts.live)
             .and_then(|s| opengs_datasets::open_dataset(&s).ok())
             .map(|d| d.len());
         Self {
@@ -226,6 +244,7 @@ impl RunState {
             swap: None,
             dataset: opts.dataset.clone(),
             last_snapshot: Instant::now(),
+            service: ServiceNotifier::from_env(),
         }
     }
 
@@ -283,6 +302,22 @@ impl RunState {
         if let Err(e) = written {
             tracing::warn!("run snapshot: {e:#}");
         }
+    }
+
+    /// One line for `systemctl status`.
+    fn service_status(&self) -> String {
+        let sensor = self
+            .stage_index(stage_names::SENSOR)
+            .map_or(0, |i| self.stages[i].processed);
+        let restarts: u32 = self.stages.iter().map(|s| s.restarts).sum();
+        format!(
+            "{sensor} frames, {} poses ({} lost), {} keyframes, {restarts} restarts; run {} in {}",
+            self.recorder.len(),
+            self.recorder.lost(),
+            self.recorder.keyframes(),
+            self.run_id,
+            self.out_dir.display()
+        )
     }
 
     /// The run record as of now.
@@ -397,6 +432,8 @@ impl RunState {
             if self.last_snapshot.elapsed() >= SNAPSHOT_EVERY {
                 self.snapshot();
             }
+            let status = self.service.status_due().then(|| self.service_status());
+            self.service.tick(status.as_deref());
             if let Some((last_seq, at)) = self.end_of_data {
                 let terminal_done = match &self.deploy.terminal_stage {
                     Some(t) => self

@@ -57,6 +57,12 @@ pub struct RunArgs {
     /// Run id namespacing the shared-memory services (default: timestamp and pid).
     #[arg(long)]
     pub run_id: Option<String>,
+    /// No end of data (for a service): after the last frame, wait for the frames a recorder
+    /// appends to a TUM folder (images first, then their rgb.txt/depth.txt lines) until
+    /// `opengs ctl stop` (exit 0) or SIGTERM (exit 130); outputs are rewritten every 5 s.
+    /// No final optimisation.
+    #[arg(long)]
+    pub live: bool,
 }
 
 /// The segmenter kinds, for `--help` and for refusing a typo before any process starts.
@@ -97,6 +103,12 @@ pub fn execute(args: &RunArgs) -> anyhow::Result<RunSummary> {
     // Validate the dataset here so a typo fails before any process starts.
     let spec = args.dataset.spec()?;
     opengs_datasets::open_dataset(&spec)?;
+    if args.live && !matches!(spec.kind, opengs_datasets::DatasetKind::Tum(_)) {
+        eprintln!(
+            "--live: {} does not grow; after its last frame the run waits until stopped",
+            args.dataset.dataset
+        );
+    }
     let max_rate = match args.max_rate {
         None if spec.kind == opengs_datasets::DatasetKind::Synthetic => {
             eprintln!(
@@ -163,7 +175,8 @@ pub fn execute(args: &RunArgs) -> anyhow::Result<RunSummary> {
         stage_flags,
         progress: !args.quiet,
         quality_every: args.quality_every,
-        finish_after_data,
+        finish_after_data: finish_after_data && !args.live,
+        live: args.live,
     })
 }
 
