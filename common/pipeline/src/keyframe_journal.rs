@@ -67,10 +67,16 @@ impl KeyframeJournal {
         match queue.try_send(kf) {
             Ok(()) => {}
             Err(TrySendError::Full(kf)) => {
-                tracing::warn!("keyframe journal behind: keyframe #{} not journalled", kf.seq)
+                tracing::warn!(
+                    "keyframe journal behind: keyframe #{} not journalled",
+                    kf.seq
+                )
             }
             Err(TrySendError::Disconnected(kf)) => {
-                tracing::warn!("keyframe journal stopped: keyframe #{} not journalled", kf.seq)
+                tracing::warn!(
+                    "keyframe journal stopped: keyframe #{} not journalled",
+                    kf.seq
+                )
             }
         }
     }
@@ -232,8 +238,15 @@ mod tests {
         let back = read_journal(dir.path());
         assert_eq!(back.len(), 3);
         for (a, b) in written.iter().zip(&back) {
-            assert_eq!((a.seq, a.intrinsics, a.depth_scale), (b.seq, b.intrinsics, b.depth_scale));
-            assert!(a.rgb == b.rgb && a.depth == b.depth, "#{}: images differ", a.seq);
+            assert_eq!(
+                (a.seq, a.intrinsics, a.depth_scale),
+                (b.seq, b.intrinsics, b.depth_scale)
+            );
+            assert!(
+                a.rgb == b.rgb && a.depth == b.depth,
+                "#{}: images differ",
+                a.seq
+            );
             let dt = (a.pose.translation.vector - b.pose.translation.vector).norm();
             assert!(dt < 1e-9 && a.pose.rotation.angle_to(&b.pose.rotation) < 1e-9);
         }
