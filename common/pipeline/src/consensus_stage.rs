@@ -82,8 +82,8 @@ impl ConsensusRunFlags {
 pub struct ConsensusArgs {
     #[command(flatten)]
     pub run: ConsensusRunFlags,
-    /// θ (m): counter Gaussians larger than this are pruned. Default: 0.25 for TUM, 0.10
-    /// otherwise (docs/METHOD.md §5.3).
+    /// θ (m): counter Gaussians larger than this are pruned. Default: 0.25 for TUM and ROS 2
+    /// bags (real sensors), 0.10 otherwise (docs/METHOD.md §5.3).
     #[arg(long)]
     pub counter_prune_scale: Option<f32>,
     /// Don't save each segmenter label map as segments/NNNNNN.png (used for `miou_raw`).
@@ -97,7 +97,13 @@ impl ConsensusArgs {
     pub fn config(&self) -> anyhow::Result<ConsensusConfig> {
         let theta = match self.counter_prune_scale {
             Some(theta) => theta,
-            None if matches!(self.dataset.spec()?.kind, DatasetKind::Tum(_)) => 0.25,
+            None if matches!(
+                self.dataset.spec()?.kind,
+                DatasetKind::Tum(_) | DatasetKind::Rosbag2(_)
+            ) =>
+            {
+                0.25
+            }
             None => 0.10,
         };
         let mut config = ConsensusConfig {

@@ -7,7 +7,8 @@ use opengs_datasets::{DatasetKind, DatasetSpec, DepthNoise};
 /// Which dataset to stream and how.
 #[derive(clap::Args, Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct DatasetArgs {
-    /// `synthetic` (the embedded room), `tum:DIR` or `replica:DIR`.
+    /// `synthetic` (the embedded room), `tum:DIR`, `replica:DIR` or `rosbag2:PATH` (a ROS 2
+    /// bag directory or .mcap file; MCAP storage).
     #[arg(long, default_value = "synthetic")]
     pub dataset: String,
     /// Use at most N frames (N ≥ 1).
@@ -48,6 +49,26 @@ pub struct DatasetArgs {
           value_parser = parse_start, allow_hyphen_values = true)]
     #[serde(default)]
     pub start: f64,
+    /// rosbag2 only: colour topic (sensor_msgs/msg/Image or CompressedImage; default: the
+    /// bag's only colour image topic).
+    #[arg(long = "rgb-topic", value_name = "TOPIC")]
+    #[serde(default)]
+    pub rgb_topic: Option<String>,
+    /// rosbag2 only: depth topic (sensor_msgs/msg/Image 16UC1 in mm or 32FC1 in m; default:
+    /// the bag's only depth image topic).
+    #[arg(long = "depth-topic", value_name = "TOPIC")]
+    #[serde(default)]
+    pub depth_topic: Option<String>,
+    /// rosbag2 only: sensor_msgs/msg/CameraInfo topic (default: the only one, or the one
+    /// beside the colour topic).
+    #[arg(long = "camera-info-topic", value_name = "TOPIC")]
+    #[serde(default)]
+    pub camera_info_topic: Option<String>,
+    /// rosbag2 only: ground-truth camera pose topic (geometry_msgs/msg/PoseStamped or
+    /// nav_msgs/msg/Odometry; default: the only one, if any; `none`: no ground truth).
+    #[arg(long = "pose-topic", value_name = "TOPIC")]
+    #[serde(default)]
+    pub pose_topic: Option<String>,
 }
 
 fn one() -> usize {
@@ -93,6 +114,10 @@ impl Default for DatasetArgs {
             drop_burst: 1,
             speed: 1,
             start: 0.0,
+            rgb_topic: None,
+            depth_topic: None,
+            camera_info_topic: None,
+            pose_topic: None,
         }
     }
 }
@@ -117,6 +142,11 @@ impl DatasetArgs {
         synthetic.start_s = self.start;
         // Values from run.json bypass the flag parsers: check them here too.
         synthetic.validate()?;
+        let rosbag2 = &mut spec.rosbag2;
+        rosbag2.rgb_topic = self.rgb_topic.clone();
+        rosbag2.depth_topic = self.depth_topic.clone();
+        rosbag2.camera_info_topic = self.camera_info_topic.clone();
+        rosbag2.pose_topic = self.pose_topic.clone();
         Ok(spec)
     }
 
@@ -139,6 +169,17 @@ impl DatasetArgs {
         a.extend(["--drop-burst".to_string(), self.drop_burst.to_string()]);
         a.extend(["--speed".to_string(), self.speed.to_string()]);
         a.extend(["--start".to_string(), self.start.to_string()]);
+        for (flag, topic) in [
+            ("--rgb-topic", &self.rgb_topic),
+            ("--depth-topic", &self.depth_topic),
+            ("--camera-info-topic", &self.camera_info_topic),
+            ("--pose-topic", &self.pose_topic),
+        ] {
+            if let Some(t) = topic {
+                // `--flag=VALUE`: a topic is never taken for a flag.
+                a.push(format!("{flag}={t}"));
+            }
+        }
         a
     }
 }
@@ -185,6 +226,14 @@ mod tests {
             "--start",
             "31.5",
             "--noise",
+            "--rgb-topic",
+            "/camera/color/image_raw",
+            "--depth-topic",
+            "/camera/aligned_depth_to_color/image_raw",
+            "--camera-info-topic",
+            "/camera/color/camera_info",
+            "--pose-topic",
+            "none",
         ])
         .expect("valid arguments");
         assert_eq!(
@@ -200,16 +249,33 @@ mod tests {
         let again: Vec<String> = args.to_args();
         let again: Vec<&str> = again.iter().map(String::as_str).collect();
         assert_eq!(parse(&again), Ok(args.clone()));
-        let s = args.spec().expect("spec").synthetic;
+        let spec = args.spec().expect("spec");
+        let s = spec.synthetic;
         assert_eq!(
             (s.scene, s.drop_rate, s.drop_burst, s.speed, s.start_s),
             (7, 0.125, 3, 2, 31.5)
+        );
+        let b = spec.rosbag2;
+        assert_eq!(
+            (
+                b.rgb_topic.as_deref(),
+                b.depth_topic.as_deref(),
+                b.camera_info_topic.as_deref(),
+                b.pose_topic.as_deref()
+            ),
+            (
+                Some("/camera/color/image_raw"),
+                Some("/camera/aligned_depth_to_color/image_raw"),
+                Some("/camera/color/camera_info"),
+                Some("none")
+            )
         );
         // Older run.json files without the new fields still load.
         let json = r#"{"dataset": "synthetic", "frames": null, "trajectory": null, "seed": 3, "noise": false}"#;
         let old: DatasetArgs = serde_json::from_str(json).expect("old run.json");
         assert_eq!(old.seed, 3);
         assert_eq!((old.scene, old.drop_burst, old.speed), (0, 1, 1));
+        assert_eq!((old.rgb_topic, old.pose_topic), (None, None));
         let json = serde_json::to_string(&args).expect("json");
         assert_eq!(serde_json::from_str::<DatasetArgs>(&json).ok(), Some(args));
     }

@@ -1,10 +1,11 @@
-//! `opengs synth`: write the synthetic room as a TUM or Replica dataset.
+//! `opengs synth`: write the synthetic room as a TUM or Replica dataset, or a ROS 2 bag.
 
 use std::path::PathBuf;
 
 use anyhow::Context;
 use indicatif::{ProgressBar, ProgressStyle};
 use opengs_datasets::replica::REPLICA_DEPTH_SCALE;
+use opengs_datasets::rosbag2::MM_DEPTH_SCALE;
 use opengs_datasets::tum::TUM_DEPTH_SCALE;
 use opengs_datasets::{
     write_dataset, DatasetFormat, DepthNoise, RgbdSource, SyntheticOptions, SyntheticSource,
@@ -17,6 +18,9 @@ pub enum SynthFormat {
     Tum,
     /// results/frame%06d.jpg, depth%06d.png, label%06d.png + traj.txt (depth scale 6553.5)
     Replica,
+    /// ROS 2 bag directory: metadata.yaml + DIR_0.mcap (zstd chunks) with rgb8 Image,
+    /// 16UC1 depth (mm), CameraInfo and PoseStamped ground truth (no labels)
+    Rosbag2,
 }
 
 #[derive(Debug, clap::Args)]
@@ -66,6 +70,7 @@ pub fn run(args: SynthArgs) -> anyhow::Result<()> {
     let (format, depth_scale) = match args.format {
         SynthFormat::Tum => (DatasetFormat::Tum, TUM_DEPTH_SCALE),
         SynthFormat::Replica => (DatasetFormat::Replica, REPLICA_DEPTH_SCALE),
+        SynthFormat::Rosbag2 => (DatasetFormat::Rosbag2, MM_DEPTH_SCALE),
     };
     let options = SyntheticOptions {
         frames: args.frames,
