@@ -554,3 +554,56 @@ fn truncated_bags_name_the_topic_read_so_far() {
     let e = err_text(open(&empty, Rosbag2Options::default()));
     assert!(e.contains("not a ROS 2 bag"), "{e}");
 }
+
+#[test]
+fn a_tum_folder_converted_by_the_script_reads_as_the_tum_frames() {
+    let Some(python) = python() else { return };
+    let dir = tempfile::tempdir().expect("tempdir");
+    let tum = dir.path().join("tum");
+    write_dataset(
+        &mut synthetic(4, 5000.0),
+        &tum,
+        DatasetFormat::Tum,
+        &mut |_, _| {},
+    )
+    .expect("write TUM");
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scripts/tum_to_rosbag2.py");
+    for encoding in ["32FC1", "16UC1"] {
+        let bag = dir.path().join(format!("bag_{encoding}"));
+        let out = Command::new(&python)
+            .arg(&script)
+            .arg(&tum)
+            .arg(&bag)
+            .args(["--depth-encoding", encoding])
+            .output()
+            .expect("python runs");
+        assert!(
+            out.status.success(),
+            "tum_to_rosbag2.py: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let mut a = open_dataset(&DatasetSpec::new(DatasetKind::Tum(tum.clone()))).expect("TUM");
+        let mut b = open(&bag, Rosbag2Options::default()).expect("bag");
+        assert_eq!((b.len(), b.intrinsics()), (a.len(), a.intrinsics()));
+        for i in 0..a.len() {
+            let (fa, fb) = (
+                a.frame(i).expect("TUM frame"),
+                b.frame(i).expect("bag frame"),
+            );
+            assert!(fa.rgb == fb.rgb, "{encoding} frame {i}: colour differs");
+            // 32FC1 metres keep TUM's 5000 units/m exactly; 16UC1 rounds to the mm.
+            let want: Vec<u16> = match encoding {
+                "32FC1" => fa.depth.clone(),
+                _ => fa
+                    .depth
+                    .iter()
+                    .map(|&d| (d as f64 / 5.0).round() as u16)
+                    .collect(),
+            };
+            assert!(fb.depth == want, "{encoding} frame {i}: depth differs");
+            assert!((fa.timestamp - fb.timestamp).abs() < 1e-9, "frame {i}");
+            let (pa, pb) = (fa.gt_pose.expect("gt"), fb.gt_pose.expect("gt"));
+            assert!((pa.to_homogeneous() - pb.to_homogeneous()).abs().max() < 1e-12);
+        }
+    }
+}
