@@ -52,7 +52,8 @@ pub struct RefineArgs {
     /// Map to refine [default: RUN_DIR/map.ply].
     #[arg(long)]
     pub map: Option<PathBuf>,
-    /// Dataset (`synthetic`, `tum:DIR`, `replica:DIR`) when run.json does not name it.
+    /// Dataset (`synthetic`, `tum:DIR`, `replica:DIR`, `rosbag2:PATH`) when run.json does not
+    /// name it.
     #[arg(long)]
     pub dataset: Option<String>,
     /// Refuse a map with NaN or infinite values instead of leaving those Gaussians out.
@@ -208,7 +209,7 @@ fn dataset_args(run_dir: &Path, dataset_override: Option<&str>) -> anyhow::Resul
             ..DatasetArgs::default()
         }),
         (None, None) => anyhow::bail!(
-            "{}: no run record; pass --dataset synthetic|tum:DIR|replica:DIR",
+            "{}: no run record; pass --dataset synthetic|tum:DIR|replica:DIR|rosbag2:PATH",
             run.run_record().display()
         ),
     }
