@@ -226,14 +226,15 @@ pub struct SegmentQuality {
     pub median_ms: f64,
 }
 
-/// Scores geometry, classic and prior on `frames` frames of `scene`
-/// against the ground-truth instances ([`crate::quality`]).
+/// Scores geometry, classic, prior and simulated (the SAM-like reference, default failure
+/// rates) on `frames` frames of `scene` against the ground-truth instances ([`crate::quality`]).
 pub fn segment_quality(frames: usize, scene: u64) -> Result<Vec<SegmentQuality>, PerceptionError> {
     let bench = bench_frames(frames, scene)?;
     let kinds = [
         SegmenterKind::Geometry,
         SegmenterKind::Classic,
         SegmenterKind::Prior,
+        SegmenterKind::Simulated,
     ];
     kinds
         .into_iter()

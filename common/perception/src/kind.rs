@@ -5,7 +5,7 @@ use std::str::FromStr;
 
 use crate::{
     ClassicSegmenter, GeometrySegmenter, PerceptionError, PriorSegmenter, Segmenter,
-    SegmenterOptions,
+    SegmenterOptions, SimulatedSegmenter,
 };
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
@@ -22,16 +22,20 @@ pub enum SegmenterKind {
     /// weights; colour only where geometry is undecided. The default.
     #[default]
     Geometry,
+    /// Ground truth with SAM's failure modes (splits, merges, misses, jittered
+    /// boundaries, shuffled ids): a reference to measure the consensus with.
+    Simulated,
 }
 
 impl SegmenterKind {
     /// Index = `kind_id` on the wire: append, never reorder.
-    pub const ALL: [SegmenterKind; 5] = [
+    pub const ALL: [SegmenterKind; 6] = [
         Self::Classic,
         Self::Prior,
         Self::Sam,
         Self::MobileSamV2,
         Self::Geometry,
+        Self::Simulated,
     ];
 
     pub fn as_str(&self) -> &'static str {
@@ -41,6 +45,7 @@ impl SegmenterKind {
             Self::Sam => "sam",
             Self::MobileSamV2 => "mobilesamv2",
             Self::Geometry => "geometry",
+            Self::Simulated => "simulated",
         }
     }
 
@@ -71,6 +76,7 @@ impl SegmenterKind {
             Self::Classic => Box::new(ClassicSegmenter::new(options.classic)?),
             Self::Prior => Box::new(PriorSegmenter::new()),
             Self::Geometry => Box::new(GeometrySegmenter::new(options.geometry)?),
+            Self::Simulated => Box::new(SimulatedSegmenter::new(options.simulated)?),
             Self::Sam | Self::MobileSamV2 => self.create_model_runner(options)?,
         };
         if options.ensemble.any() {
@@ -165,6 +171,7 @@ impl FromStr for SegmenterKind {
             "sam" => Ok(Self::Sam),
             "mobilesamv2" => Ok(Self::MobileSamV2),
             "geometry" => Ok(Self::Geometry),
+            "simulated" => Ok(Self::Simulated),
             _ => Err(PerceptionError::UnknownKind(s.to_string())),
         }
     }
@@ -187,5 +194,6 @@ mod tests {
         // The wire's kind_id is the index in ALL: the first four never move.
         assert_eq!(SegmenterKind::ALL[3], SegmenterKind::MobileSamV2);
         assert_eq!(SegmenterKind::ALL[4], SegmenterKind::Geometry);
+        assert_eq!(SegmenterKind::ALL[5], SegmenterKind::Simulated);
     }
 }

@@ -3,7 +3,8 @@
 //! Every back-end implements [`Segmenter`]: an RGB-D frame in, a label map
 //! plus the input Label-Class table out. `geometry` (depth-first, LCCP-style)
 //! and `classic` (graph-based) need no weights,
-//! `prior` replays the dataset's ground-truth instances; `sam` and
+//! `prior` replays the dataset's ground-truth instances and `simulated` corrupts them
+//! with SAM's failure modes (a reference for measuring the consensus); `sam` and
 //! `mobilesamv2` run exported ONNX models (cargo feature `onnx`, runtime
 //! library from `ORT_DYLIB_PATH`, see `scripts/setup-ort.sh`). An optional ensemble
 //! (tagger + open-vocabulary detector, [`ensemble`]) names the masks of any
@@ -29,6 +30,7 @@ pub mod quality;
 pub mod sam;
 mod segmentation;
 mod segmenter;
+pub mod simulated;
 
 pub use classic::{ClassicParams, ClassicSegmenter, EdgeWeights};
 pub use error::PerceptionError;
@@ -40,3 +42,4 @@ pub use model_paths::{
 pub use prior::PriorSegmenter;
 pub use segmentation::{SegmentInfo, Segmentation};
 pub use segmenter::{Segmenter, SegmenterInput};
+pub use simulated::{SimulatedParams, SimulatedSegmenter};

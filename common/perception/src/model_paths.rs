@@ -47,6 +47,7 @@ pub const DEFAULT_POINTS_PER_SIDE: u32 = 16;
 pub struct SegmenterOptions {
     pub classic: crate::ClassicParams,
     pub geometry: crate::GeometryParams,
+    pub simulated: crate::SimulatedParams,
     /// Required for `sam` and `mobilesamv2`.
     pub sam_models: Option<SamModelPaths>,
     /// MobileSAMv2's box-proposal model (YOLOv8 export,
@@ -66,6 +67,7 @@ impl Default for SegmenterOptions {
         Self {
             classic: Default::default(),
             geometry: Default::default(),
+            simulated: Default::default(),
             sam_models: None,
             proposals: None,
             ensemble: Default::default(),

@@ -8,7 +8,9 @@ use opengs_datasets::open_dataset;
 use opengs_geometry::Intrinsics;
 use opengs_ipc_schema::service::{KEYFRAMES, SEGMENTS};
 use opengs_ipc_schema::{now_ns, KeyframeHeader, MessageKind, SegmentLabel, SegmentsHeader, Stamp};
-use opengs_perception::{SamModelPaths, SegmenterInput, SegmenterKind, SegmenterOptions};
+use opengs_perception::{
+    SamModelPaths, SegmenterInput, SegmenterKind, SegmenterOptions, SimulatedParams,
+};
 use opengs_runtime::{
     waitset, CallbackProgression, Inlet, Outlet, RunContext, TelemetrySink, WaitSetRunResult,
     HEARTBEAT,
@@ -20,7 +22,7 @@ use crate::DatasetArgs;
 #[derive(clap::Args, Debug, Clone)]
 pub struct SegmenterArgs {
     /// geometry (depth-first, no weights), classic (graph-based, no weights), prior (ground
-    /// truth), sam or mobilesamv2 (ONNX models).
+    /// truth), simulated (ground truth with SAM's failure modes), sam or mobilesamv2 (ONNX).
     #[arg(long, default_value = "geometry")]
     pub kind: String,
     /// SAM-family image encoder ONNX (for sam / mobilesamv2).
@@ -49,7 +51,50 @@ pub struct SegmenterArgs {
     #[arg(long)]
     pub text_embeddings: Option<PathBuf>,
     #[command(flatten)]
+    pub simulated: SimulatedArgs,
+    #[command(flatten)]
     pub dataset: DatasetArgs,
+}
+
+/// `simulated`'s failure modes (defaults: opengs_perception::SimulatedParams, SAM-like).
+#[derive(clap::Args, Debug, Clone)]
+pub struct SimulatedArgs {
+    /// simulated: random seed of the corruption.
+    #[arg(long, default_value_t = 0)]
+    pub sim_seed: u64,
+    /// simulated: probability that two touching instances are one mask in a frame.
+    #[arg(long, default_value_t = SimulatedParams::default().merge_rate)]
+    pub sim_merge_rate: f32,
+    /// simulated: probability that an instance is cut into 2-4 parts in a frame.
+    #[arg(long, default_value_t = SimulatedParams::default().split_rate)]
+    pub sim_split_rate: f32,
+    /// simulated: probability that an instance under --sim-small-px is missed.
+    #[arg(long, default_value_t = SimulatedParams::default().miss_rate)]
+    pub sim_miss_rate: f32,
+    /// simulated: instances smaller than this many pixels may be missed.
+    #[arg(long, default_value_t = SimulatedParams::default().small_px)]
+    pub sim_small_px: usize,
+    /// simulated: largest boundary displacement in pixels.
+    #[arg(long, default_value_t = SimulatedParams::default().jitter_px)]
+    pub sim_jitter_px: u32,
+    /// simulated: keep mask ids stable across frames (SAM's are not).
+    #[arg(long)]
+    pub sim_no_shuffle: bool,
+}
+
+impl SimulatedArgs {
+    pub fn params(&self) -> SimulatedParams {
+        SimulatedParams {
+            seed: self.sim_seed,
+            merge_rate: self.sim_merge_rate,
+            split_rate: self.sim_split_rate,
+            miss_rate: self.sim_miss_rate,
+            small_px: self.sim_small_px,
+            jitter_px: self.sim_jitter_px,
+            shuffle: !self.sim_no_shuffle,
+            ..SimulatedParams::default()
+        }
+    }
 }
 
 /// Runs the segmenter stage until a termination signal.
@@ -65,6 +110,7 @@ pub fn run_segmenter(ctx: &RunContext, args: &SegmenterArgs) -> anyhow::Result<(
         },
         proposals: args.proposals.clone(),
         points_per_side: args.points_per_side,
+        simulated: args.simulated.params(),
         ensemble: opengs_perception::EnsembleModelPaths {
             tagger: args.tagger.clone(),
             tag_list: args.tag_list.clone(),

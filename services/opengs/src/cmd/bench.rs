@@ -46,7 +46,8 @@ enum BenchWhat {
         #[arg(long)]
         points_per_side: Option<u32>,
         /// Instead of timing alone: per-frame quality against the ground-truth instances
-        /// (Hungarian mIoU, split and merge shares, ms per frame) of geometry, classic, prior.
+        /// (Hungarian mIoU, split and merge shares, ms per frame) of geometry, classic, prior and
+        /// simulated.
         #[arg(long)]
         quality: bool,
         /// With --quality: room of the scene suite (0 = the fixed room).

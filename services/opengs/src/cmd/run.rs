@@ -32,7 +32,8 @@ pub struct RunArgs {
     #[arg(long, value_name = "HZ", value_parser = cli_values::rate, allow_hyphen_values = true)]
     pub max_rate: Option<f64>,
     /// Segmenter to start with: geometry (depth-first, no weights), classic (graph-based, no
-    /// weights), prior (ground truth), sam, mobilesamv2.
+    /// weights), prior (ground truth), simulated (ground truth with SAM's failure modes: a
+    /// reference to measure the consensus), sam, mobilesamv2.
     #[arg(long, value_parser = segmenter_kinds())]
     pub segmenter: Option<String>,
     /// Switch a consensus module off (repeatable), as in the paper's ablation table.
