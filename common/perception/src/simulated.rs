@@ -452,9 +452,9 @@ mod tests {
             .corrupt(&gt, w, h, 7);
         // 1 and 2 (≥ 200 px) cut; 3 (16 px) and 4 (100 px) intact.
         assert!((4..=8).contains(&c.parts), "{} parts", c.parts);
-        for i in 0..gt.len() {
+        for (&l, &g) in c.label_map.iter().zip(&gt) {
             // Each part lies inside one instance, and every instance pixel is covered.
-            assert_eq!(c.label_map[i] == 0, gt[i] == 0);
+            assert_eq!(l == 0, g == 0);
         }
         let mut instance_of_label: HashMap<u32, u16> = HashMap::new();
         for (i, &l) in c.label_map.iter().enumerate().filter(|(_, &l)| l != 0) {
@@ -478,12 +478,12 @@ mod tests {
         assert_eq!(c.missed, 1);
         let rename: HashMap<u16, u32> = c.masks.iter().map(|m| (m.1, m.0)).collect();
         assert!(!rename.contains_key(&3));
-        for i in 0..gt.len() {
-            let want = match gt[i] {
+        for (&l, &g) in c.label_map.iter().zip(&gt) {
+            let want = match g {
                 0 | 3 => 0,
                 g => rename[&g],
             };
-            assert_eq!(c.label_map[i], want);
+            assert_eq!(l, want);
         }
     }
 
