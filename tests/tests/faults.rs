@@ -38,10 +38,20 @@ fn signal(run_id: &str, stage: &str, sig: i32) {
 /// One fault-injected run: `faults` (poses to wait for, stage, signal) in order. Returns the
 /// run's directory once it ended (exit 0 and its stderr checked by the caller).
 fn faulted_run(dir: &Path, tag: &str, faults: &[(u64, &str, i32)]) -> (PathBuf, String) {
+    faulted_run_with(dir, tag, &RUN_ARGS, faults)
+}
+
+/// [`faulted_run`] with other run arguments.
+fn faulted_run_with(
+    dir: &Path,
+    tag: &str,
+    args: &[&str],
+    faults: &[(u64, &str, i32)],
+) -> (PathBuf, String) {
     let out = dir.join(tag);
     let run_id = format!("t{}-{tag}", std::process::id());
     let child = opengs_run(&run_id, &out)
-        .args(RUN_ARGS)
+        .args(args)
         .spawn()
         .expect("run starts");
     let mut guard = Guard(child);
@@ -165,6 +175,30 @@ fn killed_and_hung_stages_cost_seconds_not_the_run() {
     assert_eq!(tracker["restarts"], 2, "{tracker}");
     assert_eq!(tracker["hangs"], 1, "{tracker}");
     close_to(&base, &metrics(&out), "tracker killed and hung");
+}
+
+/// The segmenter stopped: its heartbeats go on during a segmentation (a SAM keyframe takes
+/// tens of seconds on a CPU), not while the process is stopped, so its 10 s watchdog finds
+/// it within the run (before: 120 s, longer than most runs) and the labels come back.
+#[test]
+fn a_stopped_segmenter_is_found_in_seconds() {
+    let _serial = serial();
+    let dir = tempfile::tempdir().expect("tmp");
+    let (out, stderr) = faulted_run_with(
+        dir.path(),
+        "segment",
+        &["--frames", "250", "--finish-steps", "0"],
+        &[(20, "segmenter", libc::SIGSTOP)],
+    );
+    assert!(stderr.contains("stage segmenter"), "{stderr}");
+    let segmenter = stage_record(&out, "segmenter");
+    assert_eq!(segmenter["hangs"], 1, "{segmenter}");
+    assert_eq!(segmenter["restarts"], 1, "{segmenter}");
+    // 25 s of data, 10 s of them without a segmenter: the later keyframes are labelled.
+    let m = metrics(&out);
+    let miou = m["miou"].as_f64().unwrap_or(0.0);
+    eprintln!("segmenter stopped at 2 s of 25: mIoU {miou:.1}");
+    assert!(miou > 60.0, "{m}");
 }
 
 /// The supervisor itself SIGKILLed mid-run (before: no trajectory.txt, run.json or latency,

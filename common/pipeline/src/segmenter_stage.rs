@@ -3,13 +3,16 @@
 //! the input Label-Class table out (docs/METHOD.md §6).
 
 use std::path::PathBuf;
+use std::sync::mpsc::RecvTimeoutError;
+use std::time::{Duration, Instant};
 
 use opengs_datasets::open_dataset;
 use opengs_geometry::Intrinsics;
 use opengs_ipc_schema::service::{KEYFRAMES, SEGMENTS};
 use opengs_ipc_schema::{now_ns, KeyframeHeader, MessageKind, SegmentLabel, SegmentsHeader, Stamp};
 use opengs_perception::{
-    SamModelPaths, SegmenterInput, SegmenterKind, SegmenterOptions, SimulatedParams,
+    PerceptionError, SamModelPaths, Segmentation, Segmenter, SegmenterInput, SegmenterKind,
+    SegmenterOptions, SimulatedParams,
 };
 use opengs_runtime::{
     waitset, CallbackProgression, Inlet, Outlet, RunContext, TelemetrySink, WaitSetRunResult,
@@ -50,6 +53,11 @@ pub struct SegmenterArgs {
     /// The detector's text feature of every tag: .npy float32 [tags, 512].
     #[arg(long)]
     pub text_embeddings: Option<PathBuf>,
+    /// Longest one segmentation may take (seconds): heartbeats go on while it runs, so the
+    /// watchdog finds a stopped process in its `watchdog_s` however slow the model; a call
+    /// still running after this long stops them and is taken for hung.
+    #[arg(long, default_value_t = 300.0, value_parser = crate::cli_values::positive)]
+    pub longest_call_s: f64,
     #[command(flatten)]
     pub simulated: SimulatedArgs,
     #[command(flatten)]
@@ -138,6 +146,7 @@ pub fn run_segmenter(ctx: &RunContext, args: &SegmenterArgs) -> anyhow::Result<(
     let _heartbeat = ws
         .attach_interval(HEARTBEAT)
         .map_err(|e| anyhow::anyhow!("WaitSet: {e:?}"))?;
+    let longest_call = Duration::from_secs_f64(args.longest_call_s);
     telemetry.ready();
     loop {
         match ws.wait_and_process_once(|_| CallbackProgression::Continue) {
@@ -177,7 +186,7 @@ pub fn run_segmenter(ctx: &RunContext, args: &SegmenterArgs) -> anyhow::Result<(
             gt_labels: view.labels,
             classes: &classes,
         };
-        let seg = match segmenter.segment(&input) {
+        let seg = match segment_alive(segmenter.as_mut(), &input, &telemetry, longest_call) {
             Ok(s) => s,
             Err(e) => {
                 // A frame the segmenter cannot handle is skipped, not fatal.
@@ -198,4 +207,39 @@ pub fn run_segmenter(ctx: &RunContext, args: &SegmenterArgs) -> anyhow::Result<(
         segments.send(header, |hd, buf| hd.encode(&seg.label_map, &labels, buf))?;
         telemetry.processed(&h.stamp, start, now_ns());
     }
+}
+
+/// Segments `input` on a thread of its own while this one sends heartbeats, for at most
+/// `longest` (a model call can take tens of seconds on a CPU; a process stopped or a call
+/// stuck past `longest` falls silent, and the watchdog takes it for hung).
+fn segment_alive(
+    segmenter: &mut dyn Segmenter,
+    input: &SegmenterInput,
+    telemetry: &TelemetrySink,
+    longest: Duration,
+) -> Result<Segmentation, PerceptionError> {
+    let started = Instant::now();
+    std::thread::scope(|scope| {
+        let (done, result) = std::sync::mpsc::channel();
+        let call = scope.spawn(move || {
+            // The receiver outlives the scope's join below.
+            let _ = done.send(segmenter.segment(input));
+        });
+        loop {
+            match result.recv_timeout(HEARTBEAT) {
+                Ok(seg) => return seg,
+                Err(RecvTimeoutError::Timeout) if started.elapsed() < longest => telemetry.alive(),
+                Err(RecvTimeoutError::Timeout) => {}
+                // The call panicked: let the stage die of it, as it would without the thread.
+                Err(RecvTimeoutError::Disconnected) => match call.join() {
+                    Err(panic) => std::panic::resume_unwind(panic),
+                    Ok(()) => {
+                        return Err(PerceptionError::InvalidInput(
+                            "the segmentation ended without a result".into(),
+                        ))
+                    }
+                },
+            }
+        }
+    })
 }
