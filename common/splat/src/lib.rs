@@ -15,11 +15,14 @@ mod bin;
 mod blend;
 mod camera;
 pub mod cpu;
+mod fused_loss;
 #[cfg(test)]
 mod grad_tests;
 mod grads;
 mod keep_heaviest;
 mod loss;
+#[cfg(test)]
+mod loss_tests;
 mod map;
 mod output;
 mod ply;

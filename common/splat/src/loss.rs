@@ -3,7 +3,8 @@
 
 use rayon::prelude::*;
 
-use crate::ssim::{ssim_plane, SsimScratch};
+use crate::cpu::SimdLevel;
+use crate::fused_loss::{band, band_rows, BandScratch, BandSums, LossInputs};
 use crate::target::TargetFrame;
 
 /// Loss weights; defaults are the paper's 0.8 / 0.2 / 0.1.
@@ -38,12 +39,11 @@ pub struct LossValue {
     pub psnr: f32,
 }
 
-/// Reusable planes of the loss.
+/// The loss evaluator; owns its per-band buffers (a few hundred KB each, reused every step:
+/// nothing image-sized is allocated per evaluation).
 #[derive(Debug, Default)]
 pub struct Loss {
-    ssim: SsimScratch,
-    render_plane: Vec<f32>,
-    grad_plane: Vec<f32>,
+    bands: Vec<BandScratch>,
 }
 
 impl Loss {
@@ -52,7 +52,9 @@ impl Loss {
     }
 
     /// Evaluates the loss of a render (`color`, `depth`) against `target`; writes dL/dC and
-    /// dL/dD (resized to one entry per pixel).
+    /// dL/dD (resized to one entry per pixel). One fused pass (`fused_loss`): SSIM
+    /// with the 11×11 Gaussian window, zero padded, its five moments shared by value and
+    /// gradient; L1 and the depth term in the same pass.
     pub fn eval(
         &mut self,
         color: &[[f32; 3]],
@@ -67,70 +69,60 @@ impl Loss {
             color.len() == n && depth.len() == n,
             "render and target sizes differ"
         );
-        dl_dcolor.clear();
+        // Every entry is written below: no clearing pass.
         dl_dcolor.resize(n, [0.0; 3]);
-        dl_ddepth.clear();
         dl_ddepth.resize(n, 0.0);
+        if n == 0 {
+            return LossValue::default();
+        }
         let (wd, hd) = (target.width as usize, target.height as usize);
         let inv_n3 = 1.0 / (3 * n) as f32;
-
-        let (mut l1, mut sq_err, mut ssim_sum) = (0.0f64, 0.0f64, 0.0f64);
-        for c in 0..3 {
-            let tp = &target.rgb[c];
-            self.render_plane.resize(n, 0.0);
-            self.grad_plane.resize(n, 0.0);
-            // One pass: the render's plane, the L1 subgradient sign(C − Ĉ) (0 at equality),
-            // and the L1 and squared-error sums.
-            let (a, s): (f64, f64) = self
-                .render_plane
-                .par_iter_mut()
-                .zip(self.grad_plane.par_iter_mut())
-                .zip(color.par_iter().zip(tp.par_iter()))
-                .with_min_len(4096)
-                .map(|((x, g), (p, &y))| {
-                    *x = p[c];
-                    *g = w.l1 * inv_n3 * sign(*x - y);
-                    let e = x.clamp(0.0, 1.0) - y;
-                    ((*x - y).abs() as f64, (e * e) as f64)
-                })
-                .reduce(|| (0.0, 0.0), |p, q| (p.0 + q.0, p.1 + q.1));
-            l1 += a;
-            sq_err += s;
-            ssim_sum += ssim_plane(
-                &self.render_plane,
-                tp,
-                wd,
-                hd,
-                -w.ssim * inv_n3,
-                Some(&mut self.grad_plane),
-                &mut self.ssim,
-            );
-            dl_dcolor
-                .par_iter_mut()
-                .zip(self.grad_plane.par_iter())
-                .with_min_len(4096)
-                .for_each(|(g, &v)| g[c] = v);
+        let valid = target
+            .depth
+            .par_chunks(1 << 14)
+            .map(|c| c.iter().filter(|&&d| d > 0.0).count())
+            .sum::<usize>();
+        let inputs = LossInputs {
+            color,
+            depth,
+            target_rgb: [&target.rgb[0], &target.rgb[1], &target.rgb[2]],
+            target_depth: &target.depth,
+            width: wd,
+            height: hd,
+            k_l1: w.l1 * inv_n3,
+            k_ssim: -w.ssim * inv_n3,
+            k_depth: if valid > 0 {
+                w.depth / valid as f32
+            } else {
+                0.0
+            },
+        };
+        let rows = band_rows(hd, rayon::current_num_threads());
+        let bands = hd.div_ceil(rows);
+        if self.bands.len() < bands {
+            self.bands.resize_with(bands, BandScratch::default);
         }
+        // Read on the calling thread: the workers have no cap of their own.
+        let simd = SimdLevel::current();
+        let sums = dl_dcolor
+            .par_chunks_mut(rows * wd)
+            .zip(dl_ddepth.par_chunks_mut(rows * wd))
+            .zip(self.bands.par_iter_mut())
+            .enumerate()
+            .map(|(b, ((gc, gd), scratch))| {
+                let r0 = b * rows;
+                band(simd, &inputs, r0, (r0 + rows).min(hd), gc, gd, scratch)
+            })
+            .reduce(BandSums::default, BandSums::add);
 
-        let valid = target.depth.par_iter().filter(|&&d| d > 0.0).count();
-        let mut depth_l1 = 0.0f64;
-        if valid > 0 {
-            let k = w.depth / valid as f32;
-            depth_l1 = dl_ddepth
-                .par_iter_mut()
-                .zip(depth.par_iter().zip(target.depth.par_iter()))
-                .with_min_len(4096)
-                .filter(|(_, (_, &t))| t > 0.0)
-                .map(|(g, (&d, &t))| {
-                    *g = k * sign(d - t);
-                    (d - t).abs() as f64
-                })
-                .sum::<f64>()
-                / valid as f64;
-        }
-        let l1 = (l1 / (3 * n) as f64) as f32;
-        let ssim = (ssim_sum / (3 * n) as f64) as f32;
-        let mse = sq_err / (3 * n) as f64;
+        let depth_l1 = if valid > 0 {
+            sums.depth / valid as f64
+        } else {
+            0.0
+        };
+        let l1 = (sums.l1 / (3 * n) as f64) as f32;
+        let ssim = (sums.ssim / (3 * n) as f64) as f32;
+        let mse = sums.sq_err / (3 * n) as f64;
         LossValue {
             total: w.l1 * l1 + w.ssim * (1.0 - ssim) + w.depth * depth_l1 as f32,
             l1,
@@ -138,16 +130,6 @@ impl Loss {
             depth_l1: depth_l1 as f32,
             psnr: (-10.0 * mse.max(1e-20).log10()) as f32,
         }
-    }
-}
-
-fn sign(v: f32) -> f32 {
-    if v > 0.0 {
-        1.0
-    } else if v < 0.0 {
-        -1.0
-    } else {
-        0.0
     }
 }
 

@@ -1,12 +1,17 @@
-//! Slow, obviously-correct renderer for tests: every pixel walks every Gaussian in depth
-//! order, restricted only to the Gaussian's 3DGS tile rectangle (as the spec says).
+//! Slow, obviously-correct twins of the fast kernels, for tests: the renderer (every pixel
+//! walks every Gaussian in depth order, restricted only to the Gaussian's 3DGS tile
+//! rectangle, as the spec says) and the mapping loss (plane by plane).
 
 use std::collections::BTreeMap;
 
 use crate::blend::{alpha_of, gaussian_power, MIN_ALPHA, MIN_TRANSMITTANCE};
 use crate::camera::Camera;
+use crate::fused_loss::sign;
+use crate::loss::{LossValue, LossWeights};
 use crate::map::GaussianMap;
 use crate::project::{project_gaussian, radius_tile_rect, ProjectedGaussian};
+use crate::ssim::{ssim_plane, SsimScratch};
+use crate::target::TargetFrame;
 use crate::tiles::{TileGrid, TILE_SIZE};
 
 pub struct RefOutput {
@@ -104,4 +109,79 @@ pub fn render_reference(map: &GaussianMap, cam: &Camera, k: usize) -> RefOutput 
         }
     }
     out
+}
+
+/// The mapping loss as it was before the fused kernel ([`crate::Loss::eval`]'s twin): plane
+/// by plane, the L1 sign and sums, then [`ssim_plane`] per channel (seven full-size blurred
+/// planes), then the depth term. Same value and gradients to rounding.
+pub fn loss_reference(
+    color: &[[f32; 3]],
+    depth: &[f32],
+    target: &TargetFrame,
+    w: &LossWeights,
+    dl_dcolor: &mut Vec<[f32; 3]>,
+    dl_ddepth: &mut Vec<f32>,
+) -> LossValue {
+    let n = target.pixels();
+    assert!(
+        color.len() == n && depth.len() == n,
+        "render and target sizes differ"
+    );
+    dl_dcolor.clear();
+    dl_dcolor.resize(n, [0.0; 3]);
+    dl_ddepth.clear();
+    dl_ddepth.resize(n, 0.0);
+    let (wd, hd) = (target.width as usize, target.height as usize);
+    let inv_n3 = 1.0 / (3 * n) as f32;
+    let mut scratch = SsimScratch::default();
+    let mut render_plane = vec![0.0f32; n];
+    let mut grad_plane = vec![0.0f32; n];
+
+    let (mut l1, mut sq_err, mut ssim_sum) = (0.0f64, 0.0f64, 0.0f64);
+    for c in 0..3 {
+        let tp = &target.rgb[c];
+        for i in 0..n {
+            let (x, y) = (color[i][c], tp[i]);
+            render_plane[i] = x;
+            grad_plane[i] = w.l1 * inv_n3 * sign(x - y);
+            l1 += (x - y).abs() as f64;
+            let e = x.clamp(0.0, 1.0) - y;
+            sq_err += (e * e) as f64;
+        }
+        ssim_sum += ssim_plane(
+            &render_plane,
+            tp,
+            wd,
+            hd,
+            -w.ssim * inv_n3,
+            Some(&mut grad_plane),
+            &mut scratch,
+        );
+        for (g, &v) in dl_dcolor.iter_mut().zip(&grad_plane) {
+            g[c] = v;
+        }
+    }
+
+    let valid = target.depth.iter().filter(|&&d| d > 0.0).count();
+    let mut depth_l1 = 0.0f64;
+    if valid > 0 {
+        let k = w.depth / valid as f32;
+        for ((g, &d), &t) in dl_ddepth.iter_mut().zip(depth).zip(&target.depth) {
+            if t > 0.0 {
+                *g = k * sign(d - t);
+                depth_l1 += (d - t).abs() as f64;
+            }
+        }
+        depth_l1 /= valid as f64;
+    }
+    let l1 = (l1 / (3 * n) as f64) as f32;
+    let ssim = (ssim_sum / (3 * n) as f64) as f32;
+    let mse = sq_err / (3 * n) as f64;
+    LossValue {
+        total: w.l1 * l1 + w.ssim * (1.0 - ssim) + w.depth * depth_l1 as f32,
+        l1,
+        ssim,
+        depth_l1: depth_l1 as f32,
+        psnr: (-10.0 * mse.max(1e-20).log10()) as f32,
+    }
 }

@@ -6,8 +6,9 @@
 //! σxx = m_xx − μx², σxy = m_xy − μxμy. As G∗ is self-adjoint (symmetric kernel, zero
 //! padding): ∂Σssim/∂x = G∗(∂/∂μx) + 2x·G∗(∂/∂m_xx) + y·G∗(∂/∂m_xy).
 //!
-//! Hand-written: the mapping loss needs this gradient, which no image crate provides, and it
-//! runs every mapping step (the hot path).
+//! Hand-written: no image crate provides this gradient. [`ssim_plane`] is the plane-by-plane
+//! form (seven full-size planes): the mapping loss's reference twin uses it; the loss itself
+//! (the hot path) runs the same maths fused with L1 and depth in `fused_loss`.
 
 use rayon::prelude::*;
 
@@ -15,13 +16,13 @@ use crate::cpu::SimdLevel;
 
 pub const SSIM_C1: f32 = 0.01 * 0.01;
 pub const SSIM_C2: f32 = 0.03 * 0.03;
-const RADIUS: usize = 5;
-const TAPS: usize = 2 * RADIUS + 1;
+pub(crate) const RADIUS: usize = 5;
+pub(crate) const TAPS: usize = 2 * RADIUS + 1;
 /// Rows per parallel task.
 const ROWS: usize = 8;
 
 /// Normalised 1D Gaussian of the window (σ = 1.5).
-fn kernel() -> [f32; TAPS] {
+pub(crate) fn kernel() -> [f32; TAPS] {
     let w: [f64; TAPS] = std::array::from_fn(|i| {
         let d = i as f64 - RADIUS as f64;
         (-d * d / (2.0 * 1.5 * 1.5)).exp()
