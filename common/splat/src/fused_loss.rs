@@ -2,7 +2,8 @@
 //! [`crate::Loss::eval`] runs; the plane-by-plane twin it replaced is `reference::loss_reference`).
 //!
 //! The image is cut into bands of rows, one rayon task each. A band walks its rows top to
-//! bottom and keeps, per colour channel, two rings of 11 rows (the window's height):
+//! bottom, four at a time, and keeps per colour channel two rings of 16 rows (a vertical
+//! block's 14-row window plus slack):
 //! 1. the horizontal blurs of x, y, x², y², xy of each new input row;
 //! 2. per moment row m: the vertical blurs give the five moments (μx, μy, m_xx, m_yy, m_xy),
 //!    from which SSIM and scale·∂ssim/∂(μx, m_xx, m_xy) follow; those three are blurred
@@ -12,9 +13,12 @@
 //!    with the L1 term, the row's L1, squared error and depth term in the same place.
 //!
 //! Each moment is computed once and used by both the value and the gradient; a band
-//! recomputes the 10 rows above and below it that its neighbours also compute. Zero padding
-//! (3DGS's `conv2d(padding = 5)`) is a zero row outside the image and zero columns in the
-//! padded row buffers. Every buffer belongs to [`BandScratch`], reused across steps.
+//! recomputes the 10 rows above and below it that its neighbours also compute, so each
+//! pixel's arithmetic does not depend on the split. Zero padding (3DGS's
+//! `conv2d(padding = 5)`) is a zero row outside the image and zero columns in the padded row
+//! buffers. The symmetric kernel shares one multiply per pair of taps; vertical blurs make
+//! four rows per pass (14 loads instead of 44); the AVX levels fuse multiply-adds. Every
+//! buffer belongs to [`BandScratch`], reused across steps.
 
 use crate::cpu::SimdLevel;
 use crate::ssim::{kernel, RADIUS, SSIM_C1, SSIM_C2, TAPS};
@@ -25,6 +29,12 @@ const MOMENTS: usize = 5;
 const DPLANES: usize = 3;
 /// Lanes of the f32 partial sums (one AVX-512 register).
 const LANES: usize = 16;
+/// Rows blurred vertically at once.
+const BLOCK: usize = 4;
+/// Input rows of a vertical block.
+const WINDOW: usize = BLOCK + 2 * RADIUS;
+/// Ring slots: a block's window plus the rows a pending gradient block still needs.
+const RING: usize = 16;
 
 /// Inputs and per-term factors of one evaluation.
 pub(crate) struct LossInputs<'a> {
@@ -77,8 +87,8 @@ pub(crate) struct BandScratch {
     /// Zero-padded rows (RADIUS zeros each side): the five moment inputs of a row, then
     /// the three gradient planes of a row.
     pad: Vec<f32>,
-    /// Row buffers of `width`: five moments, three blurred gradient planes, ssim, x, then
-    /// three per-channel gradient rows.
+    /// Row buffers of `width`: BLOCK rows of each of the five moments and the three blurred
+    /// gradient planes, ssim, x, then BLOCK rows of each channel's gradient.
     rows: Vec<f32>,
     /// A row of zeros: the rows outside the image.
     zero: Vec<f32>,
@@ -91,10 +101,10 @@ impl BandScratch {
         }
         self.width = w;
         let pw = w + 2 * RADIUS;
-        self.hm = vec![0.0; 3 * MOMENTS * TAPS * w];
-        self.hd = vec![0.0; 3 * DPLANES * TAPS * w];
+        self.hm = vec![0.0; 3 * MOMENTS * RING * w];
+        self.hd = vec![0.0; 3 * DPLANES * RING * w];
         self.pad = vec![0.0; (MOMENTS + DPLANES) * pw];
-        self.rows = vec![0.0; (MOMENTS + DPLANES + 2 + 3) * w];
+        self.rows = vec![0.0; ((MOMENTS + DPLANES + 3) * BLOCK + 2) * w];
         self.zero = vec![0.0; w];
     }
 }
@@ -119,21 +129,23 @@ pub(crate) fn band(
     gd: &mut [f32],
     s: &mut BandScratch,
 ) -> BandSums {
+    #[cfg(target_arch = "x86_64")]
+    let fma = std::arch::is_x86_feature_detected!("fma");
     match simd {
-        // SAFETY: the Avx512 level has AVX-512F (SimdLevel::detected).
+        // SAFETY: the Avx512 level has AVX-512F (SimdLevel::detected), FMA was detected.
         #[cfg(target_arch = "x86_64")]
-        SimdLevel::Avx512 => unsafe { band_avx512(inp, r0, r1, gc, gd, s) },
-        // SAFETY: the Avx2 level has AVX2 (SimdLevel::detected).
+        SimdLevel::Avx512 if fma => unsafe { band_avx512(inp, r0, r1, gc, gd, s) },
+        // SAFETY: the Avx2 level has AVX2 (SimdLevel::detected), FMA was detected.
         #[cfg(target_arch = "x86_64")]
-        SimdLevel::Avx2 => unsafe { band_avx2(inp, r0, r1, gc, gd, s) },
-        SimdLevel::Portable => band_portable(inp, r0, r1, gc, gd, s),
+        SimdLevel::Avx2 | SimdLevel::Avx512 if fma => unsafe { band_avx2(inp, r0, r1, gc, gd, s) },
+        _ => band_portable::<false>(inp, r0, r1, gc, gd, s),
     }
 }
 
 /// # Safety
-/// The caller must ensure the CPU supports AVX-512F.
+/// The caller must ensure the CPU supports AVX-512F and FMA.
 #[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx512f,avx2")]
+#[target_feature(enable = "avx512f,avx2,fma")]
 unsafe fn band_avx512(
     inp: &LossInputs,
     r0: usize,
@@ -142,13 +154,13 @@ unsafe fn band_avx512(
     gd: &mut [f32],
     s: &mut BandScratch,
 ) -> BandSums {
-    band_portable(inp, r0, r1, gc, gd, s)
+    band_portable::<true>(inp, r0, r1, gc, gd, s)
 }
 
 /// # Safety
-/// The caller must ensure the CPU supports AVX2.
+/// The caller must ensure the CPU supports AVX2 and FMA.
 #[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
+#[target_feature(enable = "avx2,fma")]
 unsafe fn band_avx2(
     inp: &LossInputs,
     r0: usize,
@@ -157,14 +169,24 @@ unsafe fn band_avx2(
     gd: &mut [f32],
     s: &mut BandScratch,
 ) -> BandSums {
-    band_portable(inp, r0, r1, gc, gd, s)
+    band_portable::<true>(inp, r0, r1, gc, gd, s)
+}
+
+/// `a·b + c`, fused where the caller's level has FMA (`mul_add` without it is a libm call).
+#[inline(always)]
+fn madd<const FMA: bool>(a: f32, b: f32, c: f32) -> f32 {
+    if FMA {
+        a.mul_add(b, c)
+    } else {
+        a * b + c
+    }
 }
 
 // Hand-written streaming kernel: the loss runs every mapping step (the hot path), and only a
 // fused pass keeps its ~20 planes per channel out of memory. Every helper below is
 // `inline(always)` so that the SIMD wrappers above compile the whole band for their level.
 #[inline(always)]
-fn band_portable(
+fn band_portable<const FMA: bool>(
     inp: &LossInputs,
     r0: usize,
     r1: usize,
@@ -192,18 +214,20 @@ fn band_portable(
         ..
     } = s;
     let (pad_m, pad_d) = pad.split_at_mut(MOMENTS * pw);
-    let (mom, rest) = rows.split_at_mut(MOMENTS * w);
-    let (bd, rest) = rest.split_at_mut(DPLANES * w);
+    let (mom, rest) = rows.split_at_mut(MOMENTS * BLOCK * w);
+    let (bd, rest) = rest.split_at_mut(DPLANES * BLOCK * w);
     let (ssim_row, rest) = rest.split_at_mut(w);
     let (x_row, g_rows) = rest.split_at_mut(w);
-    let ring_len = TAPS * w;
+    let ring_len = RING * w;
 
-    for m in m_lo..m_hi {
-        // 1. Horizontal moment blurs of the input rows up to m + RADIUS.
-        let need = (m + RADIUS).min(h - 1);
+    let mut m = m_lo;
+    while m < m_hi {
+        let m_end = (m + BLOCK).min(m_hi);
+        // 1. Horizontal moment blurs of the input rows up to m_end − 1 + RADIUS.
+        let need = (m_end - 1 + RADIUS).min(h - 1);
         while next_in <= need {
             let y = next_in;
-            let slot = (y % TAPS) * w;
+            let slot = (y % RING) * w;
             for c in 0..3 {
                 let (px, rest) = pad_m.split_at_mut(pw);
                 let (py, rest) = rest.split_at_mut(pw);
@@ -223,100 +247,103 @@ fn band_portable(
                 );
                 for j in 0..MOMENTS {
                     let ring = &mut hm[(c * MOMENTS + j) * ring_len..][..ring_len];
-                    hblur(&k, &pad_m[j * pw..(j + 1) * pw], &mut ring[slot..slot + w]);
+                    hblur::<FMA>(&k, &pad_m[j * pw..(j + 1) * pw], &mut ring[slot..slot + w]);
                 }
             }
             next_in += 1;
         }
 
-        // 2. Moments of row m, SSIM, and the horizontal blurs of the gradient planes.
-        let counted = (r0..r1).contains(&m);
+        // 2. Moments of rows m..m_end, SSIM, and the horizontal blurs of the gradient planes.
         for c in 0..3 {
             for j in 0..MOMENTS {
                 let ring = &hm[(c * MOMENTS + j) * ring_len..][..ring_len];
                 let src = window_rows(ring, zero, m, h, w);
-                vblur(&k, &src, &mut mom[j * w..(j + 1) * w]);
+                vblur_block::<FMA>(&k, &src, &mut mom[j * BLOCK * w..(j + 1) * BLOCK * w]);
             }
-            {
-                let (mux, rest) = mom.split_at(w);
-                let (muy, rest) = rest.split_at(w);
-                let (mxx, rest) = rest.split_at(w);
-                let (myy, mxy) = rest.split_at(w);
+            for r in m..m_end {
+                let o = (r - m) * w;
+                let plane = |j: usize| &mom[(j * BLOCK) * w + o..][..w];
                 let (d_mu, rest) = pad_d.split_at_mut(pw);
                 let (d_xx, d_xy) = rest.split_at_mut(pw);
                 ssim_terms(
                     inp.k_ssim,
-                    mux,
-                    muy,
-                    mxx,
-                    myy,
-                    mxy,
+                    plane(0),
+                    plane(1),
+                    plane(2),
+                    plane(3),
+                    plane(4),
                     ssim_row,
                     &mut d_mu[RADIUS..RADIUS + w],
                     &mut d_xx[RADIUS..RADIUS + w],
                     &mut d_xy[RADIUS..RADIUS + w],
                 );
-            }
-            if counted {
-                sums.ssim += lane_sum(ssim_row);
-            }
-            let slot = (m % TAPS) * w;
-            for j in 0..DPLANES {
-                let ring = &mut hd[(c * DPLANES + j) * ring_len..][..ring_len];
-                hblur(&k, &pad_d[j * pw..(j + 1) * pw], &mut ring[slot..slot + w]);
+                if (r0..r1).contains(&r) {
+                    sums.ssim += lane_sum(ssim_row);
+                }
+                let slot = (r % RING) * w;
+                for j in 0..DPLANES {
+                    let ring = &mut hd[(c * DPLANES + j) * ring_len..][..ring_len];
+                    hblur::<FMA>(&k, &pad_d[j * pw..(j + 1) * pw], &mut ring[slot..slot + w]);
+                }
             }
         }
 
-        // 3. Gradient rows whose window of gradient-plane rows is complete.
-        let ready = if m + 1 == h {
+        // 3. Gradient rows whose window of gradient-plane rows is complete, in blocks.
+        let ready = if m_end == h {
             Some(h - 1)
         } else {
-            m.checked_sub(RADIUS)
+            (m_end - 1).checked_sub(RADIUS)
         };
+        m = m_end;
         let Some(ready) = ready else { continue };
         while next_g < r1 && next_g <= ready {
-            let g = next_g;
-            let color = &inp.color[g * w..(g + 1) * w];
+            let g0 = next_g;
+            let g_end = (g0 + BLOCK).min(ready + 1).min(r1);
             for c in 0..3 {
                 for j in 0..DPLANES {
                     let ring = &hd[(c * DPLANES + j) * ring_len..][..ring_len];
-                    let src = window_rows(ring, zero, g, h, w);
-                    vblur(&k, &src, &mut bd[j * w..(j + 1) * w]);
+                    let src = window_rows(ring, zero, g0, h, w);
+                    vblur_block::<FMA>(&k, &src, &mut bd[j * BLOCK * w..(j + 1) * BLOCK * w]);
                 }
-                let t = &inp.target_rgb[c][g * w..(g + 1) * w];
-                let (b_mu, rest) = bd.split_at(w);
-                let (b_xx, b_xy) = rest.split_at(w);
-                let (l1, sq) = color_gradient(
-                    inp.k_l1,
-                    color,
-                    c,
-                    t,
-                    b_mu,
-                    b_xx,
-                    b_xy,
-                    x_row,
-                    &mut g_rows[c * w..(c + 1) * w],
-                );
-                sums.l1 += l1;
-                sums.sq_err += sq;
+                for g in g0..g_end {
+                    let o = (g - g0) * w;
+                    let plane = |j: usize| &bd[(j * BLOCK) * w + o..][..w];
+                    let (l1, sq) = color_gradient(
+                        inp.k_l1,
+                        &inp.color[g * w..(g + 1) * w],
+                        c,
+                        &inp.target_rgb[c][g * w..(g + 1) * w],
+                        plane(0),
+                        plane(1),
+                        plane(2),
+                        x_row,
+                        &mut g_rows[(c * BLOCK) * w + o..][..w],
+                    );
+                    sums.l1 += l1;
+                    sums.sq_err += sq;
+                }
             }
-            let o = (g - r0) * w;
-            interleave(g_rows, &mut gc[o..o + w]);
-            sums.depth += depth_row(
-                inp.k_depth,
-                &inp.depth[g * w..(g + 1) * w],
-                &inp.target_depth[g * w..(g + 1) * w],
-                &mut gd[o..o + w],
-            );
-            next_g += 1;
+            for g in g0..g_end {
+                let (o, og) = ((g - g0) * w, (g - r0) * w);
+                let ch = |c: usize| &g_rows[(c * BLOCK) * w + o..][..w];
+                interleave(ch(0), ch(1), ch(2), &mut gc[og..og + w]);
+                sums.depth += depth_row(
+                    inp.k_depth,
+                    &inp.depth[g * w..(g + 1) * w],
+                    &inp.target_depth[g * w..(g + 1) * w],
+                    &mut gd[og..og + w],
+                );
+            }
+            next_g = g_end;
         }
     }
     debug_assert_eq!(next_g, r1);
     sums
 }
 
-/// The TAPS rows `row − RADIUS ..= row + RADIUS` of a ring (slot = row mod TAPS), zero rows
-/// outside the image.
+/// The WINDOW rows `row − RADIUS .. row + BLOCK + RADIUS` of a ring (slot = row mod RING),
+/// zero rows outside the image (rows past the block's end may be stale: their outputs are
+/// not used).
 #[inline(always)]
 fn window_rows<'a>(
     ring: &'a [f32],
@@ -324,13 +351,13 @@ fn window_rows<'a>(
     row: usize,
     h: usize,
     w: usize,
-) -> [&'a [f32]; TAPS] {
+) -> [&'a [f32]; WINDOW] {
     std::array::from_fn(|t| {
         let r = row as isize + t as isize - RADIUS as isize;
         if r < 0 || r >= h as isize {
             &zero[..w]
         } else {
-            let slot = (r as usize % TAPS) * w;
+            let slot = (r as usize % RING) * w;
             &ring[slot..slot + w]
         }
     })
@@ -365,30 +392,56 @@ fn moment_inputs(
 /// `dst = g ∗ src` along a row: `src` is the row with RADIUS zeros on each side. The kernel
 /// is symmetric: pairs of taps share one multiply.
 #[inline(always)]
-fn hblur(k: &[f32; TAPS], src: &[f32], dst: &mut [f32]) {
+fn hblur<const FMA: bool>(k: &[f32; TAPS], src: &[f32], dst: &mut [f32]) {
     let w = dst.len();
     let s: [&[f32]; TAPS] = std::array::from_fn(|t| &src[t..t + w]);
-    symmetric_sum(k, &s, dst);
+    symmetric_sum::<FMA>(k, &s, dst);
 }
 
-/// `dst = g ∗` the rows of the window, along the column.
+/// `dst` (BLOCK rows) `= g ∗` the rows of the window, along the column: each loaded value
+/// serves up to four output rows (14 loads for 4 rows instead of 44).
 #[inline(always)]
-fn vblur(k: &[f32; TAPS], rows: &[&[f32]; TAPS], dst: &mut [f32]) {
-    symmetric_sum(k, rows, dst);
+fn vblur_block<const FMA: bool>(k: &[f32; TAPS], rows: &[&[f32]; WINDOW], dst: &mut [f32]) {
+    let w = dst.len() / BLOCK;
+    let s: [&[f32]; WINDOW] = std::array::from_fn(|t| &rows[t][..w]);
+    let (d0, rest) = dst.split_at_mut(w);
+    let (d1, rest) = rest.split_at_mut(w);
+    let (d2, d3) = rest.split_at_mut(w);
+    let d3 = &mut d3[..w];
+    let [k0, k1, k2, k3, k4, k5, ..] = *k;
+    let [s0, s1, s2, s3, s4, s5, s6, s7, s8, s9, s10, s11, s12, s13] = s;
+    for i in 0..w {
+        let v = [
+            s0[i], s1[i], s2[i], s3[i], s4[i], s5[i], s6[i], s7[i], s8[i], s9[i], s10[i], s11[i],
+            s12[i], s13[i],
+        ];
+        macro_rules! out {
+            ($o:expr) => {{
+                let acc = madd::<FMA>(k4, v[$o + 4] + v[$o + 6], k5 * v[$o + 5]);
+                let acc = madd::<FMA>(k3, v[$o + 3] + v[$o + 7], acc);
+                let acc = madd::<FMA>(k2, v[$o + 2] + v[$o + 8], acc);
+                let acc = madd::<FMA>(k1, v[$o + 1] + v[$o + 9], acc);
+                madd::<FMA>(k0, v[$o] + v[$o + 10], acc)
+            }};
+        }
+        d0[i] = out!(0);
+        d1[i] = out!(1);
+        d2[i] = out!(2);
+        d3[i] = out!(3);
+    }
 }
 
 #[inline(always)]
-fn symmetric_sum(k: &[f32; TAPS], s: &[&[f32]; TAPS], dst: &mut [f32]) {
+fn symmetric_sum<const FMA: bool>(k: &[f32; TAPS], s: &[&[f32]; TAPS], dst: &mut [f32]) {
     let w = dst.len();
     let [s0, s1, s2, s3, s4, s5, s6, s7, s8, s9, s10] = s.map(|r| &r[..w]);
     let [k0, k1, k2, k3, k4, k5, ..] = *k;
     for i in 0..w {
-        dst[i] = k5 * s5[i]
-            + k4 * (s4[i] + s6[i])
-            + k3 * (s3[i] + s7[i])
-            + k2 * (s2[i] + s8[i])
-            + k1 * (s1[i] + s9[i])
-            + k0 * (s0[i] + s10[i]);
+        let acc = madd::<FMA>(k4, s4[i] + s6[i], k5 * s5[i]);
+        let acc = madd::<FMA>(k3, s3[i] + s7[i], acc);
+        let acc = madd::<FMA>(k2, s2[i] + s8[i], acc);
+        let acc = madd::<FMA>(k1, s1[i] + s9[i], acc);
+        dst[i] = madd::<FMA>(k0, s0[i] + s10[i], acc);
     }
 }
 
@@ -416,11 +469,13 @@ fn ssim_terms(
         let a2 = 2.0 * (mxy[i] - ux * uy) + SSIM_C2;
         let b1 = ux * ux + uy * uy + SSIM_C1;
         let b2 = (mxx[i] - ux * ux) + (myy[i] - uy * uy) + SSIM_C2;
-        let inv = 1.0 / (b1 * b2);
+        // Two divisions instead of three (1/(b1·b2) as their product).
+        let (inv_b1, inv_b2) = (1.0 / b1, 1.0 / b2);
+        let inv = inv_b1 * inv_b2;
         let v = a1 * a2 * inv;
         ssim[i] = v;
-        d_mu[i] = k_ssim * (2.0 * uy * (a2 - a1) * inv + v * 2.0 * ux * (1.0 / b2 - 1.0 / b1));
-        d_xx[i] = k_ssim * (-v / b2);
+        d_mu[i] = k_ssim * (2.0 * uy * (a2 - a1) * inv + v * 2.0 * ux * (inv_b2 - inv_b1));
+        d_xx[i] = k_ssim * (-v * inv_b2);
         d_xy[i] = k_ssim * 2.0 * a1 * inv;
     }
 }
@@ -446,28 +501,24 @@ fn color_gradient(
     for i in 0..w {
         x_row[i] = color[i][c];
     }
+    for i in 0..w {
+        let (x, y) = (x_row[i], t[i]);
+        out[i] = k_l1 * sign(x - y) + (b_mu[i] + 2.0 * x * b_xx[i] + y * b_xy[i]);
+    }
     let mut abs = [0.0f32; LANES];
     let mut sq = [0.0f32; LANES];
-    let mut i = 0;
-    while i + LANES <= w {
+    let (xc, tc) = (x_row.chunks_exact(LANES), t.chunks_exact(LANES));
+    let tail = xc.remainder().iter().zip(tc.remainder());
+    let (mut a, mut q) = tail.fold((0.0f64, 0.0f64), |(a, q), (&x, &y)| {
+        let e = x.clamp(0.0, 1.0) - y;
+        (a + (x - y).abs() as f64, q + (e * e) as f64)
+    });
+    for (xs, ts) in xc.zip(tc) {
         for l in 0..LANES {
-            let (x, y) = (x_row[i + l], t[i + l]);
-            let d = x - y;
-            out[i + l] = k_l1 * sign(d) + (b_mu[i + l] + 2.0 * x * b_xx[i + l] + y * b_xy[i + l]);
-            abs[l] += d.abs();
-            let e = x.clamp(0.0, 1.0) - y;
+            abs[l] += (xs[l] - ts[l]).abs();
+            let e = xs[l].clamp(0.0, 1.0) - ts[l];
             sq[l] += e * e;
         }
-        i += LANES;
-    }
-    let (mut a, mut q) = (0.0f64, 0.0f64);
-    for i in i..w {
-        let (x, y) = (x_row[i], t[i]);
-        let d = x - y;
-        out[i] = k_l1 * sign(d) + (b_mu[i] + 2.0 * x * b_xx[i] + y * b_xy[i]);
-        a += d.abs() as f64;
-        let e = x.clamp(0.0, 1.0) - y;
-        q += (e * e) as f64;
     }
     a += abs.iter().map(|&v| v as f64).sum::<f64>();
     q += sq.iter().map(|&v| v as f64).sum::<f64>();
@@ -476,11 +527,9 @@ fn color_gradient(
 
 /// The three channel rows into the interleaved gradient.
 #[inline(always)]
-fn interleave(g_rows: &[f32], out: &mut [[f32; 3]]) {
+fn interleave(g0: &[f32], g1: &[f32], g2: &[f32], out: &mut [[f32; 3]]) {
     let w = out.len();
-    let (g0, rest) = g_rows.split_at(w);
-    let (g1, g2) = rest.split_at(w);
-    let g2 = &g2[..w];
+    let (g0, g1, g2) = (&g0[..w], &g1[..w], &g2[..w]);
     for i in 0..w {
         out[i] = [g0[i], g1[i], g2[i]];
     }
