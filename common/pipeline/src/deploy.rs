@@ -23,6 +23,8 @@ pub mod stage_names {
     pub const MAPPER: &str = "mapper";
     pub const SEGMENTER: &str = "segmenter";
     pub const CONSENSUS: &str = "consensus";
+    /// The optional Rerun viewer (`opengs run --rerun`), added by the run, not the deploy file.
+    pub const VIEWER: &str = "viewer";
 }
 
 /// One stage process.
@@ -68,6 +70,10 @@ pub struct StageSpec {
     /// message (a SAM keyframe on a CPU). 0 = no watchdog.
     #[serde(default = "default_watchdog")]
     pub watchdog_s: f64,
+    /// A sink the pipeline does not need (the Rerun viewer): its failure to start, its death
+    /// past `restart_limit` or its input errors are reported, and the run goes on without it.
+    #[serde(default)]
+    pub optional: bool,
 }
 
 /// The arguments of one kind of a swappable stage.
@@ -247,6 +253,12 @@ impl DeployFile {
                     s.name
                 )));
             }
+            if s.optional && s.role == StageRole::Source {
+                return Err(invalid(format!(
+                    "stage '{}': the source cannot be optional (the run is its data)",
+                    s.name
+                )));
+            }
             if !(-20..=19).contains(&s.nice) {
                 return Err(invalid(format!(
                     "stage '{}': nice {} outside -20..19",
@@ -351,6 +363,12 @@ mod tests {
             .expect_err("watchdog")
             .to_string()
             .contains("watchdog_s must be ≥ 0"));
+        let optional_source =
+            "[[stages]]\nname = \"a\"\nbinary = \"a\"\nrole = \"source\"\noptional = true\n";
+        assert!(DeployFile::parse(optional_source, p)
+            .expect_err("optional source")
+            .to_string()
+            .contains("source cannot be optional"));
     }
 
     #[test]

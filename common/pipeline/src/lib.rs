@@ -26,6 +26,7 @@ pub mod status;
 pub mod supervisor;
 pub mod swap;
 pub mod tracker_stage;
+pub mod viewer_args;
 
 pub use dataset_args::DatasetArgs;
 pub use deploy::{DeployFile, StageSpec};

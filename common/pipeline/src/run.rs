@@ -41,6 +41,8 @@ pub struct RunSummary {
 /// failed for good is an error, reported after the outputs so far are written.
 pub fn run(opts: RunOptions) -> anyhow::Result<RunSummary> {
     let started = Instant::now();
+    // The viewer stage asked for but not built: refused before any stage starts.
+    opts.stage_flags.viewer.check_ready()?;
     let segmenter_kinds = opengs_perception::SegmenterKind::ALL.map(|k| k.as_str());
     for stage in opts
         .deploy
@@ -122,6 +124,7 @@ mod tests {
     use crate::mapper_stage::{MapperArgs, MapperRunFlags};
     use crate::run_options::StageFlags;
     use crate::tracker_stage::{TrackerArgs, TrackerRunFlags};
+    use crate::viewer_args::ViewerArgs;
 
     fn parse<A: clap::Args>(args: &[String]) -> A {
         #[derive(Parser)]
@@ -145,6 +148,10 @@ mod tests {
             consensus: ConsensusRunFlags {
                 ablation: vec![Ablation::NoPartDecay, Ablation::NoCounterPruning],
             },
+            viewer: ViewerArgs {
+                rerun: Some("/tmp/a run.rrd".into()),
+                rerun_connect: Some("rerun+http://laptop:9876/proxy".into()),
+            },
         };
         let tracker: TrackerArgs = parse(&flags.for_stage(stage_names::TRACKER));
         assert_eq!(tracker.run, flags.tracker);
@@ -152,12 +159,15 @@ mod tests {
         assert_eq!(mapper.run, flags.mapper);
         let consensus: ConsensusArgs = parse(&flags.for_stage(stage_names::CONSENSUS));
         assert_eq!(consensus.run, flags.consensus);
+        let viewer: ViewerArgs = parse(&flags.for_stage(stage_names::VIEWER));
+        assert_eq!(viewer, flags.viewer);
         // Defaults write nothing, so a deploy file's own arguments stand alone.
         let none = StageFlags::default();
         for name in [
             stage_names::TRACKER,
             stage_names::MAPPER,
             stage_names::CONSENSUS,
+            stage_names::VIEWER,
         ] {
             assert!(none.for_stage(name).is_empty(), "{name}");
         }

@@ -7,6 +7,7 @@ use crate::consensus_stage::ConsensusRunFlags;
 use crate::deploy::{stage_names, DeployFile};
 use crate::mapper_stage::MapperRunFlags;
 use crate::tracker_stage::TrackerRunFlags;
+use crate::viewer_args::ViewerArgs;
 use crate::DatasetArgs;
 
 /// Everything `opengs run` decides before the stages start.
@@ -37,6 +38,8 @@ pub struct StageFlags {
     pub tracker: TrackerRunFlags,
     pub mapper: MapperRunFlags,
     pub consensus: ConsensusRunFlags,
+    /// `--rerun` / `--rerun-connect`: they also decide whether the viewer stage starts.
+    pub viewer: ViewerArgs,
 }
 
 impl StageFlags {
@@ -46,6 +49,7 @@ impl StageFlags {
             stage_names::TRACKER => self.tracker.to_args(),
             stage_names::MAPPER => self.mapper.to_args(),
             stage_names::CONSENSUS => self.consensus.to_args(),
+            stage_names::VIEWER => self.viewer.to_args(),
             _ => Vec::new(),
         }
     }

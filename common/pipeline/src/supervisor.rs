@@ -204,6 +204,10 @@ struct RunState {
 /// latency profile, run record.
 const SNAPSHOT_EVERY: Duration = Duration::from_secs(5);
 
+/// Seconds an optional stage (the Rerun viewer) may take to report ready before the run
+/// starts without it.
+const OPTIONAL_STARTUP_S: f64 = 10.0;
+
 impl RunState {
     fn new(opts: &RunOptions, log_dir: PathBuf) -> Self {
         let mut source_args = opts.dataset.to_args();
@@ -224,11 +228,9 @@ impl RunState {
         Self {
             run_id: opts.run_id.clone(),
             out_dir: opts.out_dir.clone(),
-            stages: opts
-                .deploy
-                .stages
-                .iter()
-                .map(|s| StageProcess::new(s.clone(), &log_dir))
+            stages: crate::viewer_args::stages_to_start(&opts.deploy, &opts.stage_flags.viewer)
+                .into_iter()
+                .map(|s| StageProcess::new(s, &log_dir))
                 .collect(),
             stage_flags: opts.stage_flags.clone(),
             source_args,
@@ -358,14 +360,29 @@ impl RunState {
             .map_err(|e| anyhow::anyhow!("{e:?}"))?;
         for i in 0..self.stages.len() {
             let args = self.args_for(i);
-            self.stages[i].spawn(&args)?;
+            let optional = self.stages[i].spec.optional;
+            if let Err(e) = self.stages[i].spawn(&args) {
+                if !optional {
+                    return Err(e);
+                }
+                self.leave_out(i, &format!("{e:#}"));
+                continue;
+            }
             self.note(&format!(
                 "starting {} (pid {})",
                 self.stages[i].spec.name,
                 self.stages[i].pid().unwrap_or(0)
             ));
-            let deadline = Instant::now() + Duration::from_secs_f64(self.deploy.startup_timeout_s);
-            while self.stages[i].state != StageState::Ready {
+            // An optional stage never holds the pipeline's start up for long.
+            let timeout_s = match optional {
+                true => self.deploy.startup_timeout_s.min(OPTIONAL_STARTUP_S),
+                false => self.deploy.startup_timeout_s,
+            };
+            let deadline = Instant::now() + Duration::from_secs_f64(timeout_s);
+            let failed = loop {
+                if self.stages[i].state == StageState::Ready {
+                    break None;
+                }
                 match ws.wait_and_process_once(|_| CallbackProgression::Continue) {
                     Ok(WaitSetRunResult::TerminationRequest | WaitSetRunResult::Interrupt) => {
                         anyhow::bail!("interrupted while starting {}", self.stages[i].spec.name)
@@ -375,24 +392,39 @@ impl RunState {
                 }
                 self.handle_telemetry(ch);
                 if let Some(status) = self.stages[i].poll_exit() {
-                    anyhow::bail!(
+                    break Some(format!(
                         "stage {} exited during start-up ({status}); its log {} ends with:\n{}",
                         self.stages[i].spec.name,
                         self.stages[i].log_path().display(),
                         self.stages[i].log_tail(15)
-                    );
+                    ));
                 }
                 if Instant::now() > deadline {
-                    anyhow::bail!(
-                        "stage {} did not report ready within {} s; see {}",
+                    break Some(format!(
+                        "stage {} did not report ready within {timeout_s} s; see {}",
                         self.stages[i].spec.name,
-                        self.deploy.startup_timeout_s,
                         self.stages[i].log_path().display()
-                    );
+                    ));
                 }
+            };
+            match failed {
+                Some(why) if optional => self.leave_out(i, &why),
+                Some(why) => anyhow::bail!("{why}"),
+                None => {}
             }
         }
         Ok(())
+    }
+
+    /// An optional stage that failed (to start, or past its restarts): stopped if it still
+    /// runs, marked failed, and the run goes on without it.
+    fn leave_out(&mut self, i: usize, why: &str) {
+        self.stages[i].stop(Duration::from_secs(1));
+        self.stages[i].state = StageState::Failed;
+        self.note(&format!(
+            "optional stage {} left out, the run goes on without it: {why}",
+            self.stages[i].spec.name
+        ));
     }
 
     fn main_loop(
@@ -683,7 +715,9 @@ impl RunState {
                 ));
                 // Its shared-memory resources must go before a replacement opens them.
                 ctx.cleanup_dead_nodes();
-                if status.code() == Some(i32::from(crate::stage_main::BAD_INPUT_EXIT)) {
+                let optional = self.stages[i].spec.optional;
+                if status.code() == Some(i32::from(crate::stage_main::BAD_INPUT_EXIT)) && !optional
+                {
                     self.stages[i].state = StageState::Failed;
                     return Ok(Some(Ending::BadInput(format!(
                         "stage {name} stopped on input it cannot use (not restarted: it would \
@@ -692,6 +726,11 @@ impl RunState {
                     ))));
                 }
                 if !self.stages[i].schedule_restart() {
+                    if optional {
+                        let why = format!("it exited ({status}) with no restarts left");
+                        self.leave_out(i, &why);
+                        continue;
+                    }
                     return Ok(Some(Ending::StageFailed(format!(
                         "stage {name} died {} times (limit {}); last log lines:\n{}",
                         self.stages[i].restarts + 1,

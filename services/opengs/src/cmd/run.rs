@@ -64,6 +64,8 @@ pub struct RunArgs {
     /// No final optimisation.
     #[arg(long)]
     pub live: bool,
+    #[command(flatten)]
+    pub viewer: opengs_pipeline::viewer_args::ViewerArgs,
 }
 
 /// The segmenter kinds, for `--help` and for refusing a typo before any process starts.
@@ -85,6 +87,8 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
 
 /// Starts the pipeline as `args` say and waits for it to finish.
 pub fn execute(args: &RunArgs) -> anyhow::Result<RunSummary> {
+    // --rerun without the viewer stage built: refused before anything else happens.
+    args.viewer.check_ready()?;
     // A SIGKILLed supervisor leaves its run's shared memory; no one else would remove it.
     crate::cmd::clean::dead_runs_at_start();
     let mut deploy = DeployFile::load(&args.deploy)?;
@@ -159,6 +163,7 @@ pub fn execute(args: &RunArgs) -> anyhow::Result<RunSummary> {
         consensus: ConsensusRunFlags {
             ablation: args.ablation.clone(),
         },
+        viewer: args.viewer.clone(),
     };
     eprintln!(
         "opengs run {run_id}: dataset {}, deploy {} ({}), output {}",
