@@ -795,6 +795,8 @@ impl RunState {
             ));
         }
         let mut last_line = Instant::now();
+        // Restarted during their final work: they get the finish signal once ready again.
+        let mut to_finish: Vec<usize> = Vec::new();
         loop {
             if self.wait_for_news(&ws)? {
                 return Ok(Ending::Interrupted);
@@ -806,6 +808,27 @@ impl RunState {
             }
             let mut waiting = 0;
             for &i in &finishing {
+                if self.stages[i].restart_due() {
+                    let args = self.args_for(i);
+                    self.stages[i].spawn(&args)?;
+                    to_finish.push(i);
+                    self.note(&format!(
+                        "restarted {} (pid {}, restart {}/{}) to do its final work again from \
+                         its checkpoint and keyframe journal",
+                        self.stages[i].spec.name,
+                        self.stages[i].pid().unwrap_or(0),
+                        self.stages[i].restarts,
+                        self.stages[i].spec.restart_limit
+                    ));
+                }
+                if self.stages[i].state == StageState::Restarting {
+                    waiting += 1;
+                    continue;
+                }
+                if to_finish.contains(&i) && self.stages[i].state == StageState::Ready {
+                    self.stages[i].signal(FINISH_SIGNAL);
+                    to_finish.retain(|&j| j != i);
+                }
                 let stage = &mut self.stages[i];
                 if !stage.is_running() {
                     continue;
@@ -815,9 +838,16 @@ impl RunState {
                     let took = start.elapsed().as_secs_f64();
                     let msg = if status.success() {
                         format!("{} finished its final work in {took:.1} s", stage.spec.name)
+                    } else if stage.schedule_restart() {
+                        waiting += 1;
+                        format!(
+                            "{} exited ({status}) during its final work; restarting it; log: {}",
+                            stage.spec.name,
+                            stage.log_path().display()
+                        )
                     } else {
                         format!(
-                            "{} exited ({status}) during its final work; log: {}",
+                            "{} exited ({status}) during its final work, no restarts left; log: {}",
                             stage.spec.name,
                             stage.log_path().display()
                         )
