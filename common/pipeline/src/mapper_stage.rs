@@ -10,7 +10,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use opengs_eval::RunDir;
-use opengs_geometry::{pose_from_tum, Intrinsics};
+use opengs_geometry::{pose_from_tum, Intrinsics, Pose};
 use opengs_ipc_schema::service::{CONSENSUS, KEYFRAMES, MAP_TARGET, RENDERS, SEGMENTS};
 use opengs_ipc_schema::{
     now_ns, ConsensusHeader, KeyframeHeader, LabelCompleteness, MapTargetHeader, MapTargetParts,
@@ -240,13 +240,7 @@ impl MapperStage {
             h.depth_scale,
             self.mapper.config(),
         );
-        self.cameras.push_back((
-            h.stamp.seq,
-            Camera::from_pose(k, &pose, self.mapper.config().near),
-        ));
-        while self.cameras.len() > KEPT_CAMERAS {
-            self.cameras.pop_front();
-        }
+        self.keep_keyframe(h.stamp.seq, pose, k, view.rgb, view.depth, h.depth_scale);
         self.record_keyframe(h.stamp.seq);
         if let Some(journal) = &self.journal {
             journal.append(JournalKeyframe {
@@ -257,12 +251,6 @@ impl MapperStage {
                 rgb: view.rgb.to_vec(),
                 depth: view.depth.to_vec(),
             });
-        }
-        if let Some(kept) = self.kept.as_mut() {
-            let pushed = kept.push(h.stamp.seq, pose, k, view.rgb, view.depth, h.depth_scale);
-            if let Err(e) = pushed {
-                tracing::warn!("{e}");
-            }
         }
         let input = DensifyInput {
             points: view.points,
@@ -444,27 +432,38 @@ impl MapperStage {
                 self.mapper.config(),
             );
             self.mapper.restore_keyframe(stored);
-            self.cameras.push_back((
+            self.keep_keyframe(
                 kf.seq,
-                Camera::from_pose(kf.intrinsics, &kf.pose, self.mapper.config().near),
-            ));
-            while self.cameras.len() > KEPT_CAMERAS {
-                self.cameras.pop_front();
-            }
-            if let Some(kept) = self.kept.as_mut() {
-                let pushed = kept.push(
-                    kf.seq,
-                    kf.pose,
-                    kf.intrinsics,
-                    &kf.rgb,
-                    &kf.depth,
-                    kf.depth_scale,
-                );
-                if let Err(e) = pushed {
-                    tracing::warn!("{e}");
-                }
-            }
+                kf.pose,
+                kf.intrinsics,
+                &kf.rgb,
+                &kf.depth,
+                kf.depth_scale,
+            );
             self.restored += 1;
+        }
+    }
+
+    /// A keyframe's camera for the consensus renders (the newest [`KEPT_CAMERAS`]) and, when
+    /// a final optimisation is asked for, its full-resolution images.
+    fn keep_keyframe(
+        &mut self,
+        seq: u64,
+        pose: Pose,
+        k: Intrinsics,
+        rgb: &[u8],
+        depth: &[u16],
+        depth_scale: f32,
+    ) {
+        self.cameras
+            .push_back((seq, Camera::from_pose(k, &pose, self.mapper.config().near)));
+        while self.cameras.len() > KEPT_CAMERAS {
+            self.cameras.pop_front();
+        }
+        if let Some(kept) = self.kept.as_mut() {
+            if let Err(e) = kept.push(seq, pose, k, rgb, depth, depth_scale) {
+                tracing::warn!("{e}");
+            }
         }
     }
 }
