@@ -31,7 +31,9 @@ const fn spec(
 
 pub const FRAMES: ServiceSpec = spec("frames", 2, 8, 0);
 pub const POSES: ServiceSpec = spec("poses", 2, 64, 0);
-pub const KEYFRAMES: ServiceSpec = spec("keyframes", 2, 16, 0);
+/// History serves a restarted mapper the keyframes sent while it was dead or hung (as many
+/// as a stopped mapper's own buffer would have held; 16 × ~2 MB of shared memory).
+pub const KEYFRAMES: ServiceSpec = spec("keyframes", 2, 16, 16);
 /// History serves a restarted consensus (or mapper) the segmentations and the render it was
 /// waiting for, so the keyframe in flight is answered instead of timing out.
 pub const SEGMENTS: ServiceSpec = spec("segments", 3, 8, 4);

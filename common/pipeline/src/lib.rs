@@ -27,6 +27,7 @@ pub mod supervisor;
 pub mod swap;
 pub mod tracker_stage;
 pub mod viewer_args;
+pub mod watchdog;
 
 pub use dataset_args::DatasetArgs;
 pub use deploy::{DeployFile, StageSpec};

@@ -2,7 +2,7 @@
 //! continuously; the trackable Gaussians out to the tracker; the map
 //! checkpointed to the run directory and written as `map.ply` at the end.
 
-use std::collections::VecDeque;
+use std::collections::{HashSet, VecDeque};
 use std::io::Write;
 use std::ops::ControlFlow;
 use std::path::{Path, PathBuf};
@@ -76,6 +76,10 @@ pub struct MapperArgs {
     pub finish_keyframes: usize,
 }
 
+/// How long a restarted mapper waits for the keyframe service's history (the tracker hands it
+/// over within a heartbeat; a tracker that has exited never does).
+const HISTORY_WAIT: Duration = Duration::from_millis(1500);
+
 /// Full-resolution cameras of the newest keyframes, for renders the consensus asks for.
 const KEPT_CAMERAS: usize = 32;
 /// A consensus not back by then is given up on (dropped or refused), and renders go on.
@@ -137,8 +141,8 @@ const CHECKPOINT_NEWS: Duration = Duration::from_secs(1);
 impl Checkpointer {
     /// Starts a write when one is due: at the first keyframe; within [`CHECKPOINT_NEWS`]
     /// of a keyframe or consensus the last checkpoint lacks (what a restart could not get
-    /// back: the tracker does not resend keyframes, and labels lost would come back as new
-    /// ones); otherwise every `every` for the optimisation's progress.
+    /// back: the keyframe service's history holds only the newest few, and labels lost
+    /// would come back as new ones); otherwise every `every` for the optimisation's progress.
     fn maybe(&mut self, map: &GaussianMap, counters: MapperCounters, consensus: u64) {
         let news = (counters.keyframes, consensus) != self.holds;
         let due = match self.last {
@@ -210,6 +214,9 @@ struct MapperStage {
     journal: Option<KeyframeJournal>,
     /// Keyframes this process got back from the journal (counted in `resumed` already).
     restored: usize,
+    /// Their seqs: the keyframe service's history hands a restarted mapper the newest
+    /// keyframes again, and only those it never got are new.
+    restored_seqs: HashSet<u64>,
 }
 
 impl MapperStage {
@@ -271,6 +278,29 @@ impl MapperStage {
         );
         self.telemetry.processed(&h.stamp, start, now_ns());
         Ok(())
+    }
+
+    /// Densifies every waiting keyframe (a backlog in one go) and sends the tracker one
+    /// target; true when there was any.
+    fn take_keyframes(
+        &mut self,
+        pool: &rayon::ThreadPool,
+        keyframes: &Inlet<KeyframeHeader>,
+    ) -> anyhow::Result<bool> {
+        let mut newest = None;
+        while let Some(sample) = keyframes.receive()? {
+            let seq = sample.user_header().stamp.seq;
+            if self.restored_seqs.contains(&seq) {
+                tracing::debug!("keyframe #{seq} (service history): back from the journal already");
+                continue;
+            }
+            self.handle_keyframe(pool, sample.user_header(), sample.payload())?;
+            newest = Some(sample.user_header().stamp);
+        }
+        if let Some(stamp) = newest {
+            self.publish_target(&stamp)?;
+        }
+        Ok(newest.is_some())
     }
 
     /// Sends the trackable Gaussians to the tracker.
@@ -441,6 +471,7 @@ impl MapperStage {
                 kf.depth_scale,
             );
             self.restored += 1;
+            self.restored_seqs.insert(kf.seq);
         }
     }
 
@@ -519,6 +550,7 @@ pub fn run_mapper(ctx: &RunContext, out_dir: &Path, args: &MapperArgs) -> anyhow
         kept: (args.run.finish_steps > 0).then(|| KeptKeyframes::new(args.finish_keyframes)),
         journal: None,
         restored: 0,
+        restored_seqs: HashSet::new(),
     };
     if resumed.restarts > 0 {
         stage.restore_keyframes(read_journal(&run.mapper_keyframes()));
@@ -556,6 +588,20 @@ pub fn run_mapper(ctx: &RunContext, out_dir: &Path, args: &MapperArgs) -> anyhow
         .attach_interval(HEARTBEAT)
         .map_err(|e| anyhow::anyhow!("WaitSet: {e:?}"))?;
     let finish = finish_requested_flag(&ws)?;
+    if resumed.restarts > 0 {
+        // The keyframes sent while this mapper was dead or hung are in the keyframe service's
+        // history, which the tracker hands over within a heartbeat; take them before saying
+        // ready, since at the end of data ready is followed by the finish signal at once.
+        let started = Instant::now();
+        let missed = stage.mapper.keyframes();
+        while started.elapsed() < HISTORY_WAIT && !stage.take_keyframes(&pool, &keyframes)? {
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        tracing::warn!(
+            "restarted: {} keyframes it had missed taken from the keyframe service's history",
+            stage.mapper.keyframes() - missed
+        );
+    }
     stage.telemetry.ready();
     let started = Instant::now();
     let mut finishing: Option<Instant> = None;
@@ -592,15 +638,7 @@ pub fn run_mapper(ctx: &RunContext, out_dir: &Path, args: &MapperArgs) -> anyhow
         keyframes.clear_wakeups();
         segments.clear_wakeups();
         consensus.clear_wakeups();
-        // A backlog of keyframes is densified in one go and the tracker gets one target.
-        let mut newest = None;
-        while let Some(sample) = keyframes.receive()? {
-            stage.handle_keyframe(&pool, sample.user_header(), sample.payload())?;
-            newest = Some(sample.user_header().stamp);
-        }
-        if let Some(stamp) = newest {
-            stage.publish_target(&stamp)?;
-        }
+        stage.take_keyframes(&pool, &keyframes)?;
         while let Some(sample) = consensus.receive()? {
             stage.handle_consensus(sample.user_header(), sample.payload());
         }

@@ -6,6 +6,10 @@ use std::process::{Child, Command, ExitStatus, Stdio};
 use std::time::{Duration, Instant};
 
 use crate::deploy::StageSpec;
+use crate::watchdog::{sample_process, SilenceClock};
+
+/// How often a quiet stage's CPU use is looked at (coarser than /proc's 10 ms ticks).
+const SAMPLE_EVERY: Duration = Duration::from_millis(250);
 
 /// Where a stage is in its life.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
@@ -34,8 +38,10 @@ pub struct StageProcess {
     child: Option<Child>,
     pid: Option<u32>,
     started_at: Instant,
-    /// Last telemetry from the running process (the watchdog's clock).
+    /// Last telemetry from the running process.
     last_heard: Instant,
+    /// The watchdog's clock: silence not excused by CPU starvation.
+    silence: SilenceClock,
     /// Times the watchdog killed it.
     pub hangs: u32,
     restart_at: Option<Instant>,
@@ -81,6 +87,7 @@ impl StageProcess {
             pid: None,
             started_at: Instant::now(),
             last_heard: Instant::now(),
+            silence: SilenceClock::new(Instant::now()),
             hangs: 0,
             restart_at: None,
             log_path,
@@ -165,6 +172,7 @@ impl StageProcess {
         self.state = StageState::Starting;
         self.started_at = Instant::now();
         self.last_heard = Instant::now();
+        self.silence.heard(self.last_heard);
         self.restart_at = None;
         Ok(())
     }
@@ -200,18 +208,27 @@ impl StageProcess {
     pub fn heard_from(&mut self, pid: u32) {
         if self.pid == Some(pid) {
             self.last_heard = Instant::now();
+            self.silence.heard(self.last_heard);
         }
     }
 
-    /// Ready but silent for longer than its `watchdog_s`: hung, stopped or deadlocked.
-    pub fn silent_for(&self) -> Option<Duration> {
+    /// Ready but silent for longer than its `watchdog_s` (not counting time it waited for a
+    /// CPU, see [`crate::watchdog`]): hung, stopped or deadlocked.
+    pub fn silent_for(&mut self) -> Option<Duration> {
         let limit = self.spec.watchdog_s;
-        let silent = self.last_heard.elapsed();
-        (limit > 0.0
-            && self.state == StageState::Ready
-            && self.child.is_some()
-            && silent.as_secs_f64() > limit)
-            .then_some(silent)
+        if !(limit > 0.0 && self.state == StageState::Ready && self.child.is_some()) {
+            return None;
+        }
+        let now = Instant::now();
+        // /proc is read only for a stage already quiet for a while, a few times a second.
+        if now.duration_since(self.last_heard) >= SAMPLE_EVERY
+            && now.duration_since(self.silence.last_tick()) >= SAMPLE_EVERY
+        {
+            let sample = self.pid.and_then(sample_process);
+            self.silence.tick(now, sample);
+        }
+        let silent = self.silence.silent();
+        (silent.as_secs_f64() > limit).then_some(silent)
     }
 
     /// SIGKILL, leaving the exit to [`Self::poll_exit`] (a stopped process cannot act on SIGTERM).

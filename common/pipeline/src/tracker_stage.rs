@@ -321,6 +321,7 @@ pub fn run_tracker(ctx: &RunContext, args: &TrackerArgs) -> anyhow::Result<()> {
         stage.early_map = wait_for_map(&map_target)?;
     }
     stage.telemetry.ready();
+    let mut last_connect = std::time::Instant::now();
     loop {
         match ws.wait_and_process_once(|_| CallbackProgression::Continue) {
             Ok(WaitSetRunResult::TerminationRequest | WaitSetRunResult::Interrupt) => return Ok(()),
@@ -328,6 +329,14 @@ pub fn run_tracker(ctx: &RunContext, args: &TrackerArgs) -> anyhow::Result<()> {
             Ok(_) => {}
         }
         stage.telemetry.alive();
+        if last_connect.elapsed() >= HEARTBEAT {
+            // A restarted mapper gets the keyframes it missed (the service's history) now,
+            // not at the next keyframe, which may never come after the end of data.
+            if let Err(e) = stage.keyframes.update_connections() {
+                tracing::debug!("{e}");
+            }
+            last_connect = std::time::Instant::now();
+        }
         map_target.clear_wakeups();
         // Only the newest map matters.
         if let (Some(sample), _) = map_target.receive_newest()? {

@@ -27,6 +27,10 @@ pub struct BenchFaultsArgs {
     /// Final optimisation steps (default 200; 0 with --quick: no mapper-during-finish case).
     #[arg(long)]
     finish_steps: Option<usize>,
+    /// Only the cases whose name contains this (e.g. "stop mapper"); the fault-free run,
+    /// which the others are compared with, always runs first.
+    #[arg(long)]
+    only: Option<String>,
     /// Where the runs and bench_faults.json go.
     #[arg(long, default_value = "bench_faults")]
     out_root: PathBuf,
@@ -108,6 +112,12 @@ pub fn run(args: BenchFaultsArgs) -> anyhow::Result<()> {
         "kill supervisor mid-run".into(),
         Fault::KillSupervisor { at: mid },
     ));
+    if let Some(only) = &args.only {
+        cases.retain(|(name, fault)| matches!(fault, Fault::None) || name.contains(only.as_str()));
+        if cases.len() == 1 {
+            anyhow::bail!("--only '{only}': no fault case has that in its name");
+        }
+    }
     println!(
         "fault campaign: {} runs of {frames} frames of the built-in room, final optimisation \
          {finish} steps; runs in {}",
