@@ -54,7 +54,7 @@ pub fn run(opts: RunOptions) -> anyhow::Result<RunSummary> {
             .check_kinds(&segmenter_kinds)
             .map_err(anyhow::Error::msg)?;
     }
-    let supervised = Supervisor::supervise(&opts)?;
+    let mut supervised = Supervisor::supervise(&opts)?;
     let run_dir = RunDir::new(&opts.out_dir);
     // A mapper killed before it wrote map.ply (hung in its final work, say) left its checkpoint.
     if !run_dir.map().exists() && run_dir.map_checkpoint().exists() {
@@ -64,7 +64,7 @@ pub fn run(opts: RunOptions) -> anyhow::Result<RunSummary> {
         }
     }
     // Outputs are written on every path: nothing produced is lost.
-    crate::run_outputs::write(&run_dir, &opts, &supervised)?;
+    crate::run_outputs::write(&run_dir, &opts, &mut supervised)?;
     let scores = crate::scoring::score(&run_dir, &opts, !supervised.recorder.is_empty());
     let summary = RunSummary {
         out_dir: opts.out_dir.clone(),

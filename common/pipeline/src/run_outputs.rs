@@ -8,9 +8,9 @@ use crate::run_options::RunOptions;
 use crate::run_record::RunRecord;
 use crate::supervisor::Supervised;
 
-pub fn write(run: &RunDir, opts: &RunOptions, supervised: &Supervised) -> anyhow::Result<()> {
+pub fn write(run: &RunDir, opts: &RunOptions, supervised: &mut Supervised) -> anyhow::Result<()> {
     if !supervised.recorder.is_empty() {
-        supervised.recorder.write(run.root())?;
+        supervised.recorder.finish()?;
     }
     supervised.profile.report().write(&run.latency())?;
     supervised.trace.write(&run.trace())?;

@@ -237,7 +237,7 @@ impl RunState {
             deploy: opts.deploy.clone(),
             profile: LatencyProfile::new(opts.deploy.terminal_stage.as_deref()),
             trace: ChromeTrace::default(),
-            recorder: Recorder::default(),
+            recorder: Recorder::new(&opts.out_dir),
             end_of_data: None,
             total_frames,
             progress: opts.progress.then(|| Progress::new(total_frames)),
@@ -295,7 +295,7 @@ impl RunState {
         let run = RunDir::new(&self.out_dir);
         let written = (|| -> anyhow::Result<()> {
             if !self.recorder.is_empty() {
-                self.recorder.write(&self.out_dir)?;
+                self.recorder.write()?;
             }
             let latency = serde_json::to_string_pretty(&self.profile.report())?;
             opengs_eval::write_atomically(&run.latency(), latency.as_bytes())?;
