@@ -45,8 +45,8 @@ impl Backward {
             dl_ddepth,
         );
         grads.reset(map.len());
-        let raster = &self.raster;
         const CHUNK: usize = 2048;
+        let screen = self.raster.drain_chunks(CHUNK);
         grads
             .means
             .par_chunks_mut(CHUNK)
@@ -54,29 +54,32 @@ impl Backward {
             .zip(grads.log_scales.par_chunks_mut(CHUNK))
             .zip(grads.opacity_logits.par_chunks_mut(CHUNK))
             .zip(grads.sh_dc.par_chunks_mut(CHUNK))
+            .zip(screen.into_par_iter())
             .enumerate()
-            .for_each(|(c, ((((means, rots), scales), opacities), shs))| {
-                for j in 0..means.len() {
-                    let i = c * CHUNK + j;
-                    // Gaussians that touched no pixel keep zero gradients.
-                    let Some(sg) = raster.gradient(i) else {
-                        continue;
-                    };
-                    let g = project_backward(
-                        camera,
-                        map.means[i],
-                        map.rotations[i],
-                        map.log_scales[i],
-                        map.opacity_logits[i],
-                        map.sh_dc[i],
-                        &sg,
-                    );
-                    means[j] = g.mean;
-                    rots[j] = g.rotation;
-                    scales[j] = g.log_scale;
-                    opacities[j] = g.opacity_logit;
-                    shs[j] = g.sh_dc;
-                }
-            });
+            .for_each(
+                |(c, (((((means, rots), scales), opacities), shs), mut screen))| {
+                    for j in 0..means.len() {
+                        let i = c * CHUNK + j;
+                        // Gaussians that touched no pixel keep zero gradients.
+                        let Some(sg) = screen.take_next() else {
+                            continue;
+                        };
+                        let g = project_backward(
+                            camera,
+                            map.means[i],
+                            map.rotations[i],
+                            map.log_scales[i],
+                            map.opacity_logits[i],
+                            map.sh_dc[i],
+                            &sg,
+                        );
+                        means[j] = g.mean;
+                        rots[j] = g.rotation;
+                        scales[j] = g.log_scale;
+                        opacities[j] = g.opacity_logit;
+                        shs[j] = g.sh_dc;
+                    }
+                },
+            );
     }
 }

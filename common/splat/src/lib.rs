@@ -71,7 +71,7 @@ pub use project::{
 };
 pub use project_backward::{project_backward, GaussianGrad};
 pub use prune::{prune, prune_mask, PruneConfig};
-pub use raster_backward::{RasterBackward, ScreenGrad};
+pub use raster_backward::{GradientChunk, RasterBackward, ScreenGrad};
 pub use rasterize::{rasterize, rasterize_into};
 pub use render::{render, render_into, Rendered};
 pub use ssim::{blur as ssim_blur, ssim_plane, SsimScratch, SSIM_C1, SSIM_C2};

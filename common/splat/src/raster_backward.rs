@@ -59,6 +59,9 @@ impl ScreenGrad {
 #[derive(Debug, Default)]
 pub struct RasterBackward {
     buffers: Vec<Vec<ScreenGrad>>,
+    /// Every entry is zero (the last gradients were drained by [`Self::drain_chunks`]): the
+    /// next run need not clear megabytes it would only overwrite.
+    zeroed: bool,
 }
 
 impl RasterBackward {
@@ -66,7 +69,7 @@ impl RasterBackward {
         Self::default()
     }
 
-    /// Runs the backward over all tiles; afterwards [`Self::gradient`] sums the threads.
+    /// Runs the backward over all tiles; afterwards [`Self::drain_chunks`] sums the threads.
     pub fn run(
         &mut self,
         projected: &Projected,
@@ -80,13 +83,19 @@ impl RasterBackward {
         assert_eq!(dl_dcolor.len(), n_pix, "dL/dC must be one entry per pixel");
         assert_eq!(dl_ddepth.len(), n_pix, "dL/dD must be one entry per pixel");
         let threads = rayon::current_num_threads().max(1);
-        self.buffers.resize_with(threads, Vec::new);
         let n = projected.len();
-        // One buffer per thread, zeroed in parallel.
-        self.buffers.par_iter_mut().for_each(|b| {
-            b.clear();
-            b.resize(n, ScreenGrad::default());
-        });
+        let clean = self.zeroed
+            && self.buffers.len() == threads
+            && self.buffers.iter().all(|b| b.len() == n);
+        if !clean {
+            // One buffer per thread, zeroed in parallel.
+            self.buffers.resize_with(threads, Vec::new);
+            self.buffers.par_iter_mut().for_each(|b| {
+                b.clear();
+                b.resize(n, ScreenGrad::default());
+            });
+        }
+        self.zeroed = false;
         let slots: Vec<Mutex<Vec<ScreenGrad>>> = self.buffers.drain(..).map(Mutex::new).collect();
         let ctx = Ctx {
             projected,
@@ -111,14 +120,58 @@ impl RasterBackward {
             .collect();
     }
 
-    /// Screen-space gradient of Gaussian `i`, summed over the per-thread buffers.
+    /// The gradients of Gaussians `c·chunk ..` in chunks to take in parallel; taking one
+    /// zeroes it while it is in cache, so the next run skips clearing the buffers.
+    pub fn drain_chunks(&mut self, chunk: usize) -> Vec<GradientChunk<'_>> {
+        // Each chunk zeroes what its taker left when dropped: all entries end zero.
+        self.zeroed = true;
+        let n = self.buffers.first().map_or(0, Vec::len);
+        let mut parts: Vec<_> = self
+            .buffers
+            .iter_mut()
+            .map(|b| b.chunks_mut(chunk.max(1)))
+            .collect();
+        (0..n.div_ceil(chunk.max(1)))
+            .map(|_| GradientChunk {
+                parts: parts.iter_mut().filter_map(Iterator::next).collect(),
+                taken: 0,
+            })
+            .collect()
+    }
+}
+
+/// One chunk of [`RasterBackward::drain_chunks`]: its gradients, taken in order.
+pub struct GradientChunk<'a> {
+    /// The chunk's slice of each thread's buffer.
+    parts: Vec<&'a mut [ScreenGrad]>,
+    taken: usize,
+}
+
+impl GradientChunk<'_> {
+    /// The next Gaussian's gradient summed over the threads (`None`: it touched no pixel),
+    /// leaving zeros behind.
     #[inline]
-    pub fn gradient(&self, i: usize) -> Option<ScreenGrad> {
+    pub fn take_next(&mut self) -> Option<ScreenGrad> {
+        let j = self.taken;
+        self.taken += 1;
         let mut g = ScreenGrad::default();
-        for b in &self.buffers {
-            g.add(&b[i]);
+        for part in &mut self.parts {
+            if let Some(e) = part.get_mut(j) {
+                g.add(e);
+                *e = ScreenGrad::default();
+            }
         }
         (!g.is_zero()).then_some(g)
+    }
+}
+
+impl Drop for GradientChunk<'_> {
+    fn drop(&mut self) {
+        for part in &mut self.parts {
+            if let Some(rest) = part.get_mut(self.taken..) {
+                rest.fill(ScreenGrad::default());
+            }
+        }
     }
 }
 
@@ -236,6 +289,9 @@ fn tile_backward(ctx: &Ctx, st: &mut TileBack, tile: usize, buf: &mut [ScreenGra
     let lane_x: [f32; T] = std::array::from_fn(|i| (tx0 + i as u32) as f32);
     for rank in (0..tile_max as usize).rev() {
         let gi = list[rank] as usize;
+        // Its gradient slot is read and written after its rows: fetch it now (a miss per
+        // Gaussian and tile otherwise, the largest single stall of this loop).
+        prefetch(buf.as_ptr().wrapping_add(gi));
         let [mx, my] = p.means2d[gi];
         let e = p.ellipses[gi];
         let [a, b, c] = p.conics[gi];
@@ -289,6 +345,18 @@ fn tile_backward(ctx: &Ctx, st: &mut TileBack, tile: usize, buf: &mut [ScreenGra
     }
 }
 
+/// Asks for the cache line at `p` (a hint: no effect where there is no prefetch instruction).
+#[inline(always)]
+fn prefetch<V>(p: *const V) {
+    #[cfg(target_arch = "x86_64")]
+    // SAFETY: prefetching is a hint and never faults, whatever the address.
+    unsafe {
+        std::arch::x86_64::_mm_prefetch(p.cast::<i8>(), std::arch::x86_64::_MM_HINT_T0);
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = p;
+}
+
 /// One Gaussian's data as the lane loop needs it.
 struct LaneGaussian {
     mean_x: f32,
@@ -299,22 +367,24 @@ struct LaneGaussian {
     rank: u32,
 }
 
-/// Per-lane gradient sums of one Gaussian over the rows it touches in a tile.
+/// Per-lane gradient sums of one Gaussian over the rows it touches in a tile. Both halves
+/// of a row add into the same H lanes: the sums stay register-sized, and no load spans two
+/// stores of another width (a store-forwarding stall that cost a tenth of the backward).
 #[derive(Default)]
 struct Accum {
-    mx: [f32; T],
-    my: [f32; T],
-    ca: [f32; T],
-    cb: [f32; T],
-    cc: [f32; T],
-    op: [f32; T],
-    val: [[f32; T]; CH],
+    mx: [f32; H],
+    my: [f32; H],
+    ca: [f32; H],
+    cb: [f32; H],
+    cc: [f32; H],
+    op: [f32; H],
+    val: [[f32; H]; CH],
     any: bool,
 }
 
 impl Accum {
     fn finish(&self) -> ScreenGrad {
-        let s = |v: &[f32; T]| v.iter().sum::<f32>();
+        let s = |v: &[f32; H]| v.iter().sum::<f32>();
         ScreenGrad {
             mean2d: [s(&self.mx), s(&self.my)],
             conic: [s(&self.ca), s(&self.cb), s(&self.cc)],
@@ -375,8 +445,10 @@ fn undo_lanes(
     let behind: [[f32; H]; CH] = std::array::from_fn(|ch| lanes(&st.acc[ch][ly], o));
     let last_v: [[f32; H]; CH] = std::array::from_fn(|ch| lanes(&st.last_v[ch][ly], o));
     // Updated state goes to fresh arrays: every lane is written, so selects stay blends.
-    let (mut t_out, mut last_a_out) = ([0.0f32; H], [0.0f32; H]);
-    let (mut behind_out, mut last_v_out) = ([[0.0f32; H]; CH], [[0.0f32; H]; CH]);
+    // (Started as copies, not zeros: a zeroed template is built in memory with stores of
+    // mixed widths, and reading it back stalls store forwarding.)
+    let (mut t_out, mut last_a_out) = (t, last_a);
+    let (mut behind_out, mut last_v_out) = (behind, last_v);
     let dpix: [[f32; H]; CH] = std::array::from_fn(|ch| lanes(&st.dpix[ch][ly], o));
     let n_contrib = lanes(&st.n_contrib[ly], o);
     let mut any = false;
@@ -398,7 +470,7 @@ fn undo_lanes(
             let bh = la * last_v[ch][i] + (1.0 - la) * behind[ch][i];
             // dC/dα_k = T_k·(v_k − what is composited behind k).
             dl_dalpha += (v - bh) * dpix[ch][i];
-            acc.val[ch][o + i] += if active { weight * dpix[ch][i] } else { 0.0 };
+            acc.val[ch][i] += if active { weight * dpix[ch][i] } else { 0.0 };
             behind_out[ch][i] = if active { bh } else { behind[ch][i] };
             last_v_out[ch][i] = if active { v } else { last_v[ch][i] };
         }
@@ -410,13 +482,12 @@ fn undo_lanes(
         } else {
             0.0
         };
-        let k = o + i;
-        acc.op[k] += if live { gauss * dl_dalpha } else { 0.0 };
-        acc.mx[k] -= dl_dpower * (a * dx + b * dy);
-        acc.my[k] -= dl_dpower * (b * dx + c * dy);
-        acc.ca[k] -= 0.5 * dl_dpower * dx * dx;
-        acc.cb[k] -= dl_dpower * dx * dy;
-        acc.cc[k] -= 0.5 * dl_dpower * dy * dy;
+        acc.op[i] += if live { gauss * dl_dalpha } else { 0.0 };
+        acc.mx[i] -= dl_dpower * (a * dx + b * dy);
+        acc.my[i] -= dl_dpower * (b * dx + c * dy);
+        acc.ca[i] -= 0.5 * dl_dpower * dx * dx;
+        acc.cb[i] -= dl_dpower * dx * dy;
+        acc.cc[i] -= 0.5 * dl_dpower * dy * dy;
         t_out[i] = if active { t_front } else { t[i] };
         last_a_out[i] = if active { alpha } else { la };
         any |= active;
