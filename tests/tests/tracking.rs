@@ -74,3 +74,32 @@ fn kinect_noise_run_stays_under_three_centimetres() {
     let rmse = m["ate_rmse_cm"].as_f64().expect("ate_rmse_cm");
     assert!(rmse < 3.0, "ATE RMSE {rmse} cm");
 }
+
+/// `opengs bench track`: the tracker alone over 40 frames of the room along fr1_xyz (fast
+/// hand-held motion) reports its time percentiles, no lost frame, and a pose error that
+/// matches what the pipeline reaches (millimetres), all without starting a stage.
+#[test]
+fn bench_track_times_the_tracker_alone() {
+    let output = Command::new(binary("opengs"))
+        .args(["bench", "track", "--frames", "40", "--slow-ms", "100000"])
+        .arg("--trajectory")
+        .arg(fr1_xyz())
+        .output()
+        .expect("opengs bench track");
+    let stdout = String::from_utf8_lossy(&output.stdout);
+    assert!(
+        output.status.success(),
+        "{stdout}\n{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    assert!(stdout.contains("per frame: p50"), "{stdout}");
+    assert!(stdout.contains("(40 frames, 1 thread(s))"), "{stdout}");
+    assert!(stdout.contains("lost 0 of 40"), "{stdout}");
+    let error_cm: f64 = stdout
+        .split("position error RMSE ")
+        .nth(1)
+        .and_then(|rest| rest.split(" cm").next())
+        .and_then(|v| v.parse().ok())
+        .unwrap_or_else(|| panic!("no error figure in: {stdout}"));
+    assert!(error_cm < 0.5, "{stdout}");
+}

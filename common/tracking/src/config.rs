@@ -28,6 +28,10 @@ pub struct TrackerConfig {
     /// Fine iterations of a wide search's registrations and of a polishing restart.
     pub wide_iterations: usize,
     pub polish_iterations: usize,
+    /// The wide search and its polishing restarts register a source thinned to one point per
+    /// voxel of this side (m; 0: every point); only their winner is refined with every point.
+    /// They are exploratory, and nine of them at full size cost a gap frame 200+ ms.
+    pub wide_source_voxel: f64,
     /// What a registration must satisfy to be trusted.
     pub verify: VerifyConfig,
     pub relocalise: RelocaliseConfig,
@@ -59,6 +63,7 @@ impl TrackerConfig {
             restart_step: 0.03,
             wide_iterations: 30,
             polish_iterations: 10,
+            wide_source_voxel: 0.03,
             fast_path_offset: 0.025,
             verify: VerifyConfig::default(),
             relocalise: RelocaliseConfig::default(),

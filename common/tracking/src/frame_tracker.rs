@@ -440,6 +440,8 @@ impl FrameTracker {
         let mut best: Option<Registration> = None;
         let mut attempt: Verified = Err("no registration tried".into());
         let mut wide: Option<String> = None;
+        // Made when the wide search starts (most frames never need it).
+        let mut thin: Option<Cloud> = None;
         for (k, &(start, kind)) in tries.iter().enumerate() {
             if k == 1 {
                 wide = Some(match (&best, gap) {
@@ -458,7 +460,13 @@ impl FrameTracker {
                     },
                 });
             }
-            match self.register_verified(frame, &cloud, &start, kind, Some(&prior)) {
+            let source = match kind {
+                Attempt::Fast => &cloud,
+                _ => {
+                    thin.get_or_insert_with(|| cloud.voxel_subsample(self.config.wide_source_voxel))
+                }
+            };
+            match self.register_verified(frame, source, &start, kind, Some(&prior)) {
                 Ok(r) if best.as_ref().is_none_or(|b| r.fitness > b.fitness) => best = Some(r),
                 Ok(_) => {}
                 Err(why) => attempt = Err(why),
@@ -476,8 +484,19 @@ impl FrameTracker {
                 break;
             }
         }
-        if let (Some(r), true) = (&best, wide.is_some()) {
-            best = Some(self.polish(frame, &cloud, r.clone(), &prior));
+        if let (Some(r), Some(thin)) = (&best, &thin) {
+            let polished = self.polish(frame, thin, r.clone(), &prior);
+            // The winner, refined with every point (its verified thin answer if that fails).
+            best = Some(
+                self.register_verified(
+                    frame,
+                    &cloud,
+                    &polished.transform,
+                    Attempt::Polish,
+                    Some(&prior),
+                )
+                .unwrap_or(polished),
+            );
         }
         if let Some(r) = best {
             attempt = Ok(r);

@@ -23,6 +23,9 @@ enum BenchWhat {
     Faults(super::bench_faults::BenchFaultsArgs),
     /// G-ICP registration time and tracker throughput.
     Gicp(super::bench_gicp::BenchGicpArgs),
+    /// The tracker alone over a dataset, one frame at a time: per-frame time percentiles,
+    /// the wide-search frames and their cost, lost frames, position error.
+    Track(super::bench_track::BenchTrackArgs),
     /// One mapping step (forward + backward + Adam) with 100k Gaussians at 640×480 and
     /// 320×240; with `--run DIR`, the rates the mapper sustained in that run.
     Map(super::bench_map::BenchMapArgs),
@@ -61,6 +64,7 @@ pub fn run(args: BenchArgs) -> anyhow::Result<()> {
         BenchWhat::Ipc(a) => super::bench_ipc::run(a),
         BenchWhat::Render(a) => super::bench_render::run(a),
         BenchWhat::Gicp(a) => super::bench_gicp::run(a),
+        BenchWhat::Track(a) => super::bench_track::run(a),
         BenchWhat::Slam(a) => super::bench_slam::run(a),
         BenchWhat::Faults(a) => super::bench_faults::run(a),
         BenchWhat::Map(a) => super::bench_map::run(a),

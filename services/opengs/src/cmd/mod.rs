@@ -6,6 +6,7 @@ pub mod bench_ipc;
 pub mod bench_map;
 pub mod bench_render;
 pub mod bench_slam;
+pub mod bench_track;
 pub mod clean;
 pub mod ctl;
 pub mod eval;

@@ -1,0 +1,120 @@
+//! `opengs bench track`: the tracker alone over a dataset, frame by frame, on one thread
+//! (as the tracker stage runs): per-frame time percentiles, the frames that ran the wide
+//! search (after a gap, or when the fast registration failed or slid) and what they cost,
+//! lost frames and the error against the ground truth. The pipeline's tracker p99 includes
+//! queueing behind a slow frame; this is the work itself.
+
+use std::time::Instant;
+
+use anyhow::Context;
+use hdrhistogram::Histogram;
+use opengs_datasets::open_dataset;
+use opengs_pipeline::DatasetArgs;
+use opengs_tracking::{DepthFrame, FrameTracker, TrackerConfig};
+
+#[derive(clap::Args)]
+pub struct BenchTrackArgs {
+    #[command(flatten)]
+    dataset: DatasetArgs,
+    /// Threads of the tracker's pool (the tracker stage runs one).
+    #[arg(long, default_value_t = 1, value_parser = opengs_pipeline::cli_values::at_least_one)]
+    threads: usize,
+    /// Print every frame slower than this (ms).
+    #[arg(long, default_value_t = 50.0)]
+    slow_ms: f64,
+}
+
+struct Frame {
+    timestamp: f64,
+    depth: Vec<u16>,
+    depth_scale: f64,
+    gt: Option<opengs_geometry::Pose>,
+}
+
+pub fn run(args: BenchTrackArgs) -> anyhow::Result<()> {
+    let spec = args.dataset.spec()?;
+    let mut source = open_dataset(&spec).context("opening the dataset")?;
+    let k = source.intrinsics();
+    let n = source.len();
+    // Decoded up front: only tracking is timed.
+    let mut frames = Vec::with_capacity(n);
+    for i in 0..n {
+        let f = source.frame(i).with_context(|| format!("frame {i}"))?;
+        frames.push(Frame {
+            timestamp: f.timestamp,
+            depth: f.depth,
+            depth_scale: f64::from(f.depth_scale),
+            gt: f.gt_pose,
+        });
+    }
+    println!("{}: {n} frames, {}×{}", source.name(), k.width, k.height);
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(args.threads)
+        .build()?;
+    // As the tracker stage: the model is rebuilt on a thread of its own.
+    let mut tracker = FrameTracker::with_background_model(TrackerConfig::for_width(k.width))?;
+    if let Some(gt) = frames.first().and_then(|f| f.gt) {
+        tracker.set_first_pose(gt);
+    }
+    let mut all = Histogram::<u64>::new_with_bounds(1, 600_000_000, 3)?;
+    let mut wide = Histogram::<u64>::new_with_bounds(1, 600_000_000, 3)?;
+    let (mut lost, mut sq_err, mut scored) = (0usize, 0.0f64, 0usize);
+    for (i, f) in frames.iter().enumerate() {
+        let frame = DepthFrame {
+            depth: &f.depth,
+            depth_scale: f.depth_scale,
+            intrinsics: &k,
+            timestamp: f.timestamp,
+        };
+        let start = Instant::now();
+        let out = pool.install(|| tracker.track(&frame));
+        let us = start.elapsed().as_micros() as u64;
+        all.saturating_record(us);
+        if out.wide_search.is_some() {
+            wide.saturating_record(us);
+        }
+        let ms = us as f64 / 1e3;
+        if ms > args.slow_ms {
+            println!(
+                "  frame {i:5} ({:.3} s): {ms:6.1} ms  {:?}{}",
+                f.timestamp,
+                out.status,
+                out.wide_search
+                    .as_deref()
+                    .map_or(String::new(), |w| format!(", wide search: {w}"))
+            );
+        }
+        if out.status.has_pose() {
+            if let Some(gt) = f.gt {
+                sq_err += (out.pose.translation.vector - gt.translation.vector).norm_squared();
+                scored += 1;
+            }
+        } else {
+            lost += 1;
+        }
+    }
+    let q = |h: &Histogram<u64>, p: f64| h.value_at_quantile(p) as f64 / 1e3;
+    println!(
+        "per frame: p50 {:.1} ms, p90 {:.1} ms, p99 {:.1} ms, max {:.1} ms ({} frames, {} thread(s))",
+        q(&all, 0.5),
+        q(&all, 0.9),
+        q(&all, 0.99),
+        all.max() as f64 / 1e3,
+        all.len(),
+        args.threads
+    );
+    if !wide.is_empty() {
+        println!(
+            "wide search: {} frames, median {:.1} ms, max {:.1} ms",
+            wide.len(),
+            q(&wide, 0.5),
+            wide.max() as f64 / 1e3
+        );
+    }
+    let rmse = (scored > 0).then(|| (sq_err / scored as f64).sqrt() * 100.0);
+    println!(
+        "lost {lost} of {n}; position error RMSE {} (no alignment: the first pose is the truth)",
+        rmse.map_or("n/a (no ground truth)".into(), |e| format!("{e:.3} cm"))
+    );
+    Ok(())
+}
