@@ -24,7 +24,9 @@
 //!      flat book on a desk). Colour alone never cuts: a checker or brick
 //!      pattern is one surface.
 //! 4. Segments = connected components of patches over joined boundaries;
-//!    pieces under `min_pixels` join the neighbour with the weakest cut.
+//!    pieces under `min_pixels` join the neighbour with the weakest cut;
+//!    large planar segments in one plane that do not touch join
+//!    ([`coplanar`]: one floor around a table's legs).
 //! 5. Holes without depth take the single segment around them, else 0.
 //! 6. Confidence = boundary-length-weighted mean evidence of the segment's
 //!    cut boundaries (a depth step is 1, a colour cut at most 0.5).
@@ -45,6 +47,7 @@
 //!   contour, which is what keeps textured surfaces whole.
 
 mod convexity;
+mod coplanar;
 mod patches;
 mod regions;
 
@@ -87,6 +90,11 @@ pub struct GeometryParams {
     pub colour_cut: f32,
     /// Segments smaller than this join their weakest-bounded neighbour.
     pub min_pixels: u32,
+    /// Planar segments of at least this share of the frame that lie in one plane
+    /// (normals within `coplanar_angle`, offsets within `offset_scale` per metre) and do
+    /// not touch are one surface seen around an occluder; 0 turns the join off.
+    pub coplanar_min_share: f32,
+    pub coplanar_angle: f32,
     /// Seeds the per-frame shuffle of label ids.
     pub seed: u64,
 }
@@ -106,6 +114,8 @@ impl Default for GeometryParams {
             weak_evidence: 0.35,
             colour_cut: 0.3,
             min_pixels: 40,
+            coplanar_min_share: 0.02,
+            coplanar_angle: 0.1,
             seed: 0x6e0_5e9,
         }
     }
@@ -137,7 +147,10 @@ impl GeometrySegmenter {
             ]
             .into_iter()
             .all(positive)
-            && params.colour_cut.is_finite();
+            && params.colour_cut.is_finite()
+            && [params.coplanar_min_share, params.coplanar_angle]
+                .into_iter()
+                .all(|x| x.is_finite() && x >= 0.0);
         if !valid {
             return Err(PerceptionError::InvalidInput(format!(
                 "geometry segmenter parameters out of range: {params:?}"
@@ -214,6 +227,12 @@ impl GeometrySegmenter {
             p.min_pixels,
             &mut self.sets,
         );
+        let (segment_of_patch, count) = coplanar::CoplanarRules {
+            min_share: p.coplanar_min_share,
+            max_angle: p.coplanar_angle,
+            offset_scale: p.offset_scale,
+        }
+        .join(&patches.stats, &self.edges, &segment_of_patch, count);
         let confidence =
             regions::segment_confidence(&self.edges, &verdicts, &segment_of_patch, count);
         let segments = regions::paint_and_fill_holes(&patches.of, &segment_of_patch, coarse.width);

@@ -234,3 +234,53 @@ fn bad_sizes_and_parameters_are_errors() {
     };
     assert!(GeometrySegmenter::new(bad).is_err());
 }
+
+/// A tall cabinet close in front of the camera hides the floor's middle from the top of
+/// the image to the bottom: the floor is seen as two pieces that do not touch. They are one
+/// plane, so they are one segment (before the coplanar join: one label per piece).
+#[test]
+fn a_floor_split_by_an_occluder_stays_one_segment() {
+    let cabinet = Shape::Cuboid {
+        min: [-0.15, 0.0, 0.3],
+        max: [0.15, 1.5, 0.8],
+    };
+    let r = desk_view(vec![
+        floor(Paint::Checker(0.25, BLACK, WHITE)),
+        (cabinet, Paint::Plain(WHITE)),
+    ])
+    .render();
+    // The cabinet reaches across every row: no floor pixel links the two sides.
+    let w = WIDTH as usize;
+    for row in r.object.chunks(w) {
+        let (first, last) = (
+            row.iter().position(|&o| o == 1),
+            row.iter().rposition(|&o| o == 1),
+        );
+        let (Some(a), Some(b)) = (first, last) else {
+            panic!("the cabinet does not cross every row");
+        };
+        assert!(row[a..=b].iter().all(|&o| o == 1));
+    }
+    let seg = segment(&r);
+    assert_apart(&seg, &r, &[0, 1], "floor around a cabinet");
+    let without = {
+        let input = SegmenterInput {
+            width: WIDTH,
+            height: HEIGHT,
+            rgb: &r.rgb,
+            depth: &r.depth,
+            depth_scale: DEPTH_SCALE,
+            intrinsics: r.intrinsics,
+            gt_labels: None,
+            classes: &[],
+        };
+        let params = GeometryParams {
+            coplanar_min_share: 0.0,
+            ..GeometryParams::default()
+        };
+        let mut segmenter = GeometrySegmenter::new(params).expect("valid params");
+        segmenter.segment(&input).expect("segmentation")
+    };
+    let (_, cover, _) = dominant(&without, &r, 0);
+    assert!(cover < 0.8, "without the join the floor is in pieces (largest {cover:.2})");
+}
