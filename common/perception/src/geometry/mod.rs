@@ -114,7 +114,7 @@ impl Default for GeometryParams {
             weak_evidence: 0.35,
             colour_cut: 0.3,
             min_pixels: 40,
-            coplanar_min_share: 0.02,
+            coplanar_min_share: 0.05,
             coplanar_angle: 0.1,
             seed: 0x6e0_5e9,
         }
