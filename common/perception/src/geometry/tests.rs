@@ -282,5 +282,8 @@ fn a_floor_split_by_an_occluder_stays_one_segment() {
         segmenter.segment(&input).expect("segmentation")
     };
     let (_, cover, _) = dominant(&without, &r, 0);
-    assert!(cover < 0.8, "without the join the floor is in pieces (largest {cover:.2})");
+    assert!(
+        cover < 0.8,
+        "without the join the floor is in pieces (largest {cover:.2})"
+    );
 }
