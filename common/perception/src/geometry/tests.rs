@@ -10,6 +10,10 @@ use super::scenes::*;
 use super::*;
 
 fn segment(r: &Rendered) -> Segmentation {
+    segment_with(r, GeometryParams::default())
+}
+
+fn segment_with(r: &Rendered, params: GeometryParams) -> Segmentation {
     let input = SegmenterInput {
         width: WIDTH,
         height: HEIGHT,
@@ -20,7 +24,7 @@ fn segment(r: &Rendered) -> Segmentation {
         gt_labels: None,
         classes: &[],
     };
-    let mut segmenter = GeometrySegmenter::new(GeometryParams::default()).expect("valid params");
+    let mut segmenter = GeometrySegmenter::new(params).expect("valid params");
     segmenter.segment(&input).expect("segmentation")
 }
 
@@ -263,24 +267,13 @@ fn a_floor_split_by_an_occluder_stays_one_segment() {
     }
     let seg = segment(&r);
     assert_apart(&seg, &r, &[0, 1], "floor around a cabinet");
-    let without = {
-        let input = SegmenterInput {
-            width: WIDTH,
-            height: HEIGHT,
-            rgb: &r.rgb,
-            depth: &r.depth,
-            depth_scale: DEPTH_SCALE,
-            intrinsics: r.intrinsics,
-            gt_labels: None,
-            classes: &[],
-        };
-        let params = GeometryParams {
+    let without = segment_with(
+        &r,
+        GeometryParams {
             coplanar_min_share: 0.0,
             ..GeometryParams::default()
-        };
-        let mut segmenter = GeometrySegmenter::new(params).expect("valid params");
-        segmenter.segment(&input).expect("segmentation")
-    };
+        },
+    );
     let (_, cover, _) = dominant(&without, &r, 0);
     assert!(
         cover < 0.8,
