@@ -20,6 +20,7 @@ use std::collections::HashSet;
 
 use super::convexity::PatchEdge;
 use super::patches::PatchStats;
+use crate::classic::labels::compact_components;
 use crate::classic::union_find::UnionFind;
 
 /// Thresholds of the coplanar join.
@@ -156,24 +157,13 @@ impl CoplanarRules {
                 }
             }
         }
-        let mut index_of_root = vec![u32::MAX; count];
-        let mut next = 0u32;
-        let new_of_segment: Vec<u32> = (0..count as u32)
-            .map(|s| {
-                let root = sets.find(s) as usize;
-                if index_of_root[root] == u32::MAX {
-                    index_of_root[root] = next;
-                    next += 1;
-                }
-                index_of_root[root]
-            })
-            .collect();
+        let (new_of_segment, joined) = compact_components(&mut sets, count);
         (
             segment_of_patch
                 .iter()
                 .map(|&s| new_of_segment[s as usize])
                 .collect(),
-            next as usize,
+            joined,
         )
     }
 }
