@@ -16,6 +16,8 @@ pub enum ControlCommand {
     Stop = 2,
     /// Payload: `STAGE KIND`, e.g. `segmenter prior`.
     Swap = 3,
+    /// Payload: `STAGE N`, e.g. `segmenter 4`: run N replicas of the stage.
+    Scale = 4,
     /// Supervisor → ctl. Payload: JSON text.
     Reply = 100,
 }
@@ -26,6 +28,7 @@ impl ControlCommand {
             1 => Self::Status,
             2 => Self::Stop,
             3 => Self::Swap,
+            4 => Self::Scale,
             100 => Self::Reply,
             _ => return None,
         })

@@ -33,10 +33,12 @@ pub const FRAMES: ServiceSpec = spec("frames", 2, 8, 0);
 pub const POSES: ServiceSpec = spec("poses", 2, 64, 0);
 /// History serves a restarted mapper the keyframes sent while it was dead or hung (as many
 /// as a stopped mapper's own buffer would have held; 16 × ~2 MB of shared memory).
+/// Subscribers: the mapper, the viewer and up to 6 segmenter replicas.
 pub const KEYFRAMES: ServiceSpec = spec("keyframes", 2, 16, 16);
 /// History serves a restarted consensus (or mapper) the segmentations and the render it was
-/// waiting for, so the keyframe in flight is answered instead of timing out.
-pub const SEGMENTS: ServiceSpec = spec("segments", 3, 8, 4);
+/// waiting for, so the keyframe in flight is answered instead of timing out. Publishers:
+/// up to 6 segmenter replicas, one more while a swap or a scale starts a process beside them.
+pub const SEGMENTS: ServiceSpec = spec("segments", 8, 8, 4);
 pub const RENDERS: ServiceSpec = spec("renders", 2, 8, 2);
 pub const CONSENSUS: ServiceSpec = spec("consensus", 2, 16, 0);
 /// The newest map target is all the tracker needs; history 1 serves a restarted tracker.

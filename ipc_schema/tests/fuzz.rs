@@ -1225,6 +1225,7 @@ impl Target for Control {
                 ControlCommand::Status,
                 ControlCommand::Stop,
                 ControlCommand::Swap,
+                ControlCommand::Scale,
                 ControlCommand::Reply,
             ],
         );

@@ -149,6 +149,12 @@ impl RunDir {
     pub fn logs_dir(&self) -> PathBuf {
         self.file("logs")
     }
+
+    /// Which segmenter process took which keyframe: one file per keyframe, created by the
+    /// replica that claimed it (`opengs_pipeline::keyframe_claims`).
+    pub fn segmenter_claims(&self) -> PathBuf {
+        self.file("segmenter_claims")
+    }
 }
 
 /// Writes `bytes` to `path` through a temporary file beside it, synced and renamed: a reader
@@ -192,6 +198,7 @@ mod tests {
             d.segments_dir(),
             d.renders_dir(),
             d.logs_dir(),
+            d.segmenter_claims(),
         ];
         let unique: std::collections::BTreeSet<_> = all.iter().collect();
         assert_eq!(unique.len(), all.len());

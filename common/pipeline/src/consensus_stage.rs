@@ -3,7 +3,7 @@
 //! the global Label-Class table and keeps it in the run directory (`label_table.json`), so a
 //! restarted consensus resumes with the labels the map already carries.
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 
 use opengs_datasets::DatasetKind;
@@ -148,8 +148,10 @@ struct ConsensusStage {
     telemetry: TelemetrySink,
     out_dir: PathBuf,
     save_pngs: bool,
-    /// Seq of the last keyframe answered (by this process or, restarted, its predecessor).
+    /// Seq of the newest keyframe answered (by this process or, restarted, its predecessor).
     last_answered: Option<u64>,
+    /// The newest keyframes answered ([`ANSWERED_KEPT`]), so none is answered twice.
+    answered: BTreeSet<u64>,
     /// Restarted: the first keyframe answered after the restart is still to be reported.
     resumed: bool,
 }
@@ -158,7 +160,25 @@ struct ConsensusStage {
 #[derive(serde::Serialize, serde::Deserialize)]
 struct ConsensusProgress {
     last_answered: u64,
+    /// The newest keyframes answered (out of order with segmenter replicas). Absent in files
+    /// of older runs: then every keyframe up to `last_answered` counts as answered.
+    #[serde(default)]
+    answered: Option<Vec<u64>>,
 }
+
+impl ConsensusProgress {
+    /// The keyframes a restarted consensus must not answer again.
+    fn answered(&self) -> BTreeSet<u64> {
+        match &self.answered {
+            Some(seqs) => seqs.iter().copied().collect(),
+            None => (self.last_answered.saturating_sub(ANSWERED_KEPT as u64)..=self.last_answered)
+                .collect(),
+        }
+    }
+}
+
+/// Answered keyframes remembered (far more than the segmentations that can wait).
+const ANSWERED_KEPT: usize = 256;
 
 impl ConsensusStage {
     fn take_segments(&mut self, h: &SegmentsHeader, payload: &[u8]) {
@@ -198,7 +218,13 @@ impl ConsensusStage {
                 tracing::warn!("segments #{}: {e}", h.stamp.seq);
             }
         }
-        insert_bounded(&mut self.segments, h.stamp.seq, seg, MAX_WAITING_SEGMENTS);
+        insert_bounded(
+            &mut self.segments,
+            h.stamp.seq,
+            seg,
+            MAX_WAITING_SEGMENTS,
+            "segmentation without a render",
+        );
     }
 
     fn take_render(&mut self, h: &RenderHeader, payload: &[u8]) {
@@ -220,10 +246,19 @@ impl ConsensusStage {
             label_map: view.label_map.to_vec(),
             completeness,
         };
-        insert_bounded(&mut self.renders, h.stamp.seq, render, MAX_WAITING_RENDERS);
+        insert_bounded(
+            &mut self.renders,
+            h.stamp.seq,
+            render,
+            MAX_WAITING_RENDERS,
+            "render without a segmentation",
+        );
     }
 
-    /// Runs every keyframe that has both halves, oldest first; drops what is older.
+    /// Runs every keyframe that has both halves, oldest first. Segmenter replicas finish
+    /// keyframes out of order and the mapper renders the newest first, so an older keyframe
+    /// still waiting for its render is kept (until [`MAX_WAITING_SEGMENTS`] newer ones push it
+    /// out); each keyframe is answered once.
     fn run_joined(&mut self) -> anyhow::Result<()> {
         while let Some(seq) = self
             .segments
@@ -235,11 +270,9 @@ impl ConsensusStage {
             else {
                 break;
             };
-            self.segments.retain(|&s, _| s > seq);
-            self.renders.retain(|&s, _| s > seq);
-            if self.last_answered.is_some_and(|last| seq <= last) {
+            if self.answered.contains(&seq) {
                 // Service history hands a restarted consensus what its predecessor answered.
-                tracing::debug!("keyframe #{seq}: answered before the restart");
+                tracing::debug!("keyframe #{seq}: answered already");
                 continue;
             }
             if std::mem::take(&mut self.resumed) {
@@ -251,8 +284,15 @@ impl ConsensusStage {
                 );
             }
             self.process(&seg, &render)?;
-            self.last_answered = Some(seq);
-            let progress = serde_json::to_vec(&ConsensusProgress { last_answered: seq })?;
+            self.last_answered = Some(self.last_answered.map_or(seq, |l| l.max(seq)));
+            self.answered.insert(seq);
+            while self.answered.len() > ANSWERED_KEPT {
+                self.answered.pop_first();
+            }
+            let progress = serde_json::to_vec(&ConsensusProgress {
+                last_answered: self.last_answered.unwrap_or(seq),
+                answered: Some(self.answered.iter().copied().collect()),
+            })?;
             let path = RunDir::new(&self.out_dir).consensus_progress();
             if let Err(e) = opengs_eval::write_atomically(&path, &progress) {
                 tracing::error!("{}: {e}", path.display());
@@ -310,10 +350,13 @@ impl ConsensusStage {
     }
 }
 
-fn insert_bounded<T>(map: &mut BTreeMap<u64, T>, seq: u64, value: T, cap: usize) {
+/// Keeps `value` until its other half comes, dropping the oldest (logged as stale) past `cap`.
+fn insert_bounded<T>(map: &mut BTreeMap<u64, T>, seq: u64, value: T, cap: usize, what: &str) {
     map.insert(seq, value);
     while map.len() > cap {
-        map.pop_first();
+        if let Some((old, _)) = map.pop_first() {
+            tracing::info!("keyframe #{old}: {what} dropped, stale ({cap} newer ones wait)");
+        }
     }
 }
 
@@ -408,10 +451,10 @@ pub fn run_consensus(ctx: &RunContext, out_dir: &Path, args: &ConsensusArgs) -> 
         }
         None => LabelConsensus::new(config)?,
     };
-    let resumed_from = std::fs::read(RunDir::new(out_dir).consensus_progress())
+    let progress = std::fs::read(RunDir::new(out_dir).consensus_progress())
         .ok()
-        .and_then(|bytes| serde_json::from_slice::<ConsensusProgress>(&bytes).ok())
-        .map(|p| p.last_answered);
+        .and_then(|bytes| serde_json::from_slice::<ConsensusProgress>(&bytes).ok());
+    let resumed_from = progress.as_ref().map(|p| p.last_answered);
     std::fs::create_dir_all(out_dir)?;
     if !args.no_segment_pngs {
         std::fs::create_dir_all(RunDir::new(out_dir).segments_dir())?;
@@ -428,6 +471,7 @@ pub fn run_consensus(ctx: &RunContext, out_dir: &Path, args: &ConsensusArgs) -> 
         out_dir: out_dir.to_path_buf(),
         save_pngs: !args.no_segment_pngs,
         last_answered: resumed_from,
+        answered: progress.map(|p| p.answered()).unwrap_or_default(),
         resumed: resumed_from.is_some(),
     };
     let ws = waitset()?;
@@ -462,4 +506,22 @@ pub fn run_consensus(ctx: &RunContext, out_dir: &Path, args: &ConsensusArgs) -> 
     stage.consensus.table().save(&table_path)?;
     tracing::info!("consensus: {} global labels", stage.consensus.table().len());
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_restarted_consensus_knows_which_keyframes_it_answered() {
+        // Out of order (segmenter replicas): 41 answered, 40 not yet.
+        let now: ConsensusProgress =
+            serde_json::from_str(r#"{"last_answered": 42, "answered": [39, 41, 42]}"#)
+                .expect("parses");
+        assert_eq!(now.answered(), BTreeSet::from([39, 41, 42]));
+        // A file from before replicas: everything up to the last answered counts.
+        let old: ConsensusProgress =
+            serde_json::from_str(r#"{"last_answered": 3}"#).expect("parses");
+        assert_eq!(old.answered(), BTreeSet::from([0, 1, 2, 3]));
+    }
 }

@@ -27,6 +27,31 @@ pub mod stage_names {
     pub const VIEWER: &str = "viewer";
 }
 
+/// Most processes one stage may run (`replicas`, `opengs ctl scale`).
+pub const MAX_REPLICAS: u32 = 6;
+
+/// Stages that may run several processes: their work is per keyframe and they share it out
+/// (the segmenter claims keyframes, [`crate::keyframe_claims`]). The tracker, mapper and
+/// consensus carry state from one message to the next, so a second process would diverge.
+pub const SCALABLE_STAGES: [&str; 1] = [stage_names::SEGMENTER];
+
+/// Why `stage` cannot run `replicas` processes, if it cannot.
+pub fn check_replicas(stage: &str, replicas: u32) -> Result<(), String> {
+    if !(1..=MAX_REPLICAS).contains(&replicas) {
+        return Err(format!(
+            "stage '{stage}': replicas must be 1-{MAX_REPLICAS}, got {replicas}"
+        ));
+    }
+    if replicas > 1 && !SCALABLE_STAGES.contains(&stage) {
+        return Err(format!(
+            "stage '{stage}' cannot run replicas: only {} share their work out (the others \
+             carry state from one message to the next)",
+            SCALABLE_STAGES.join(", ")
+        ));
+    }
+    Ok(())
+}
+
 /// One stage process.
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -74,6 +99,14 @@ pub struct StageSpec {
     /// past `restart_limit` or its input errors are reported, and the run goes on without it.
     #[serde(default)]
     pub optional: bool,
+    /// Processes of this stage sharing its work (only the stages in [`SCALABLE_STAGES`]);
+    /// `opengs ctl scale` changes it while the run goes on.
+    #[serde(default = "default_replicas")]
+    pub replicas: u32,
+}
+
+fn default_replicas() -> u32 {
+    1
 }
 
 /// The arguments of one kind of a swappable stage.
@@ -244,6 +277,7 @@ impl DeployFile {
                     s.name
                 )));
             }
+            check_replicas(&s.name, s.replicas).map_err(invalid)?;
             if !names.insert(&s.name) {
                 return Err(invalid(format!("stage '{}' appears twice", s.name)));
             }
@@ -369,6 +403,35 @@ mod tests {
             .expect_err("optional source")
             .to_string()
             .contains("source cannot be optional"));
+    }
+
+    #[test]
+    fn only_the_segmenter_runs_replicas_and_only_a_few() {
+        let p = Path::new("x.toml");
+        let file = |stage: &str, replicas: u32| {
+            format!(
+                "[[stages]]\nname = \"{stage}\"\nbinary = \"b\"\nreplicas = {replicas}\n\
+                 [[stages]]\nname = \"sensor\"\nbinary = \"s\"\nrole = \"source\"\n"
+            )
+        };
+        let d = DeployFile::parse(&file("segmenter", 4), p).expect("4 segmenters");
+        assert_eq!(d.stages[0].replicas, 4);
+        assert_eq!(d.stages[1].replicas, 1, "default");
+        let err = DeployFile::parse(&file("mapper", 2), p).expect_err("2 mappers");
+        assert!(
+            err.to_string().contains("'mapper' cannot run replicas"),
+            "{err}"
+        );
+        let err = DeployFile::parse(&file("segmenter", 7), p).expect_err("7 segmenters");
+        assert!(
+            err.to_string().contains("replicas must be 1-6, got 7"),
+            "{err}"
+        );
+        let err = DeployFile::parse(&file("segmenter", 0), p).expect_err("none");
+        assert!(
+            err.to_string().contains("replicas must be 1-6, got 0"),
+            "{err}"
+        );
     }
 
     #[test]

@@ -2,7 +2,7 @@
 //! continuously; the trackable Gaussians out to the tracker; the map
 //! checkpointed to the run directory and written as `map.ply` at the end.
 
-use std::collections::{HashSet, VecDeque};
+use std::collections::{BTreeMap, HashSet, VecDeque};
 use std::io::Write;
 use std::ops::ControlFlow;
 use std::path::{Path, PathBuf};
@@ -194,8 +194,8 @@ struct MapperStage {
     mapper: Mapper,
     map_target: Outlet<MapTargetHeader>,
     renders: Outlet<RenderHeader>,
-    /// Newest segmented keyframe not rendered yet (header only: seq and size).
-    waiting_segments: Option<SegmentsHeader>,
+    /// Segmented keyframes not rendered yet (headers only: seq and size), by seq.
+    waiting_segments: SegmentsQueue,
     /// Render sent, consensus not back yet: the next render waits for it, so it shows the
     /// labels this consensus sets (keyframe N+1 must see the result of N).
     outstanding: Option<(u64, Instant)>,
@@ -217,6 +217,53 @@ struct MapperStage {
     /// Their seqs: the keyframe service's history hands a restarted mapper the newest
     /// keyframes again, and only those it never got are new.
     restored_seqs: HashSet<u64>,
+}
+
+/// Segmented keyframes waiting for their render. Replicas of the segmenter finish keyframes
+/// out of order; the newest is rendered first (its labels are the freshest), the others when
+/// the mapper is free again, each once. Past [`MAX_WAITING_SEGMENTS`] the oldest is dropped,
+/// and the log says which.
+#[derive(Default)]
+struct SegmentsQueue {
+    waiting: BTreeMap<u64, SegmentsHeader>,
+    /// Seqs rendered already: service history (a restarted segmenter or mapper) and a swap's
+    /// two processes can hand the same segmentation over twice.
+    rendered: VecDeque<u64>,
+}
+
+/// Segmentations waiting for a render (a keyframe a second at most, on a slow segmenter).
+const MAX_WAITING_SEGMENTS: usize = 8;
+
+impl SegmentsQueue {
+    fn push(&mut self, h: SegmentsHeader) {
+        let seq = h.stamp.seq;
+        if self.rendered.contains(&seq) {
+            tracing::debug!("segments #{seq}: rendered for the consensus already");
+            return;
+        }
+        self.waiting.insert(seq, h);
+        while self.waiting.len() > MAX_WAITING_SEGMENTS {
+            if let Some((old, _)) = self.waiting.pop_first() {
+                tracing::info!(
+                    "segments #{old}: dropped, stale ({MAX_WAITING_SEGMENTS} newer \
+                     segmentations wait for a render)"
+                );
+            }
+        }
+    }
+
+    fn take_newest(&mut self) -> Option<SegmentsHeader> {
+        let (seq, h) = self.waiting.pop_last()?;
+        self.rendered.push_back(seq);
+        if self.rendered.len() > 64 {
+            self.rendered.pop_front();
+        }
+        Some(h)
+    }
+
+    fn is_empty(&self) -> bool {
+        self.waiting.is_empty()
+    }
 }
 
 impl MapperStage {
@@ -342,7 +389,10 @@ impl MapperStage {
     ) -> anyhow::Result<()> {
         let seq = h.stamp.seq;
         let Some(camera) = self.cameras.iter().find(|(s, _)| *s == seq).map(|c| c.1) else {
-            tracing::warn!("segments #{seq}: keyframe unknown here, no render");
+            tracing::warn!(
+                "segments #{seq}: dropped, stale (the keyframe is not among the newest \
+                 {KEPT_CAMERAS} held here), no render"
+            );
             return Ok(());
         };
         if (camera.width(), camera.height()) != (h.width, h.height) {
@@ -382,7 +432,8 @@ impl MapperStage {
     fn handle_consensus(&mut self, h: &ConsensusHeader, payload: &[u8]) {
         let start = now_ns();
         let seq = h.stamp.seq;
-        if self.outstanding.is_some_and(|(s, _)| s <= seq) {
+        // Segmenter replicas answer out of order: only this keyframe's result frees the next.
+        if self.outstanding.is_some_and(|(s, _)| s == seq) {
             self.outstanding = None;
         }
         let view = match h.decode(payload) {
@@ -538,7 +589,7 @@ pub fn run_mapper(ctx: &RunContext, out_dir: &Path, args: &MapperArgs) -> anyhow
         mapper,
         map_target: Outlet::new(ctx, &node, &MAP_TARGET, 1 << 20)?,
         renders: Outlet::new(ctx, &node, &RENDERS, 640 * 480 * 4 + (1 << 16))?,
-        waiting_segments: None,
+        waiting_segments: SegmentsQueue::default(),
         outstanding: None,
         cameras: VecDeque::new(),
         top_k: args.top_k.max(1),
@@ -642,21 +693,20 @@ pub fn run_mapper(ctx: &RunContext, out_dir: &Path, args: &MapperArgs) -> anyhow
         while let Some(sample) = consensus.receive()? {
             stage.handle_consensus(sample.user_header(), sample.payload());
         }
-        // Only the newest segmented keyframe is worth a render.
-        if let (Some(sample), _) = segments.receive_newest()? {
-            stage.waiting_segments = Some(*sample.user_header());
+        while let Some(sample) = segments.receive()? {
+            stage.waiting_segments.push(*sample.user_header());
         }
         if stage
             .outstanding
             .is_none_or(|(_, since)| since.elapsed() > CONSENSUS_TIMEOUT)
         {
-            if let Some(h) = stage.waiting_segments.take() {
+            if let Some(h) = stage.waiting_segments.take_newest() {
                 stage.handle_segments(&pool, &h)?;
             }
         }
         if finish.load(Ordering::Relaxed) {
             // The last segmented keyframe's consensus still counts; then mapping ends.
-            let semantic_done = stage.waiting_segments.is_none() && stage.outstanding.is_none();
+            let semantic_done = stage.waiting_segments.is_empty() && stage.outstanding.is_none();
             let since = *finishing.get_or_insert_with(Instant::now);
             if semantic_done || since.elapsed() > CONSENSUS_TIMEOUT {
                 ended_by_finish = true;
@@ -777,4 +827,40 @@ pub fn run_mapper(ctx: &RunContext, out_dir: &Path, args: &MapperArgs) -> anyhow
     std::fs::write(run.mapper_report(), serde_json::to_string_pretty(&stats)?)?;
     tracing::info!("mapper: {stats}");
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn segments(seq: u64) -> SegmentsHeader {
+        let stamp = Stamp::new(MessageKind::Segments, seq, 0, 0);
+        SegmentsHeader::new(stamp, 64, 48, 0, 0)
+    }
+
+    #[test]
+    fn out_of_order_segmentations_are_rendered_newest_first_each_once() {
+        let mut q = SegmentsQueue::default();
+        // Replicas finish 12, then 10, then 11.
+        for seq in [12, 10, 11] {
+            q.push(segments(seq));
+        }
+        let first = q.take_newest().map(|h| h.stamp.seq);
+        // 12 again (a restarted segmenter's service history): rendered already, ignored.
+        q.push(segments(12));
+        let rest: Vec<u64> = std::iter::from_fn(|| q.take_newest().map(|h| h.stamp.seq)).collect();
+        assert_eq!((first, rest), (Some(12), vec![11, 10]));
+        assert!(q.is_empty());
+    }
+
+    #[test]
+    fn past_its_bound_the_oldest_waiting_segmentation_is_dropped() {
+        let mut q = SegmentsQueue::default();
+        for seq in 100..100 + MAX_WAITING_SEGMENTS as u64 + 2 {
+            q.push(segments(seq));
+        }
+        let all: Vec<u64> = std::iter::from_fn(|| q.take_newest().map(|h| h.stamp.seq)).collect();
+        let expected: Vec<u64> = (102..100 + MAX_WAITING_SEGMENTS as u64 + 2).rev().collect();
+        assert_eq!(all, expected, "100 and 101 dropped as stale");
+    }
 }

@@ -123,6 +123,7 @@ mod tests {
     use crate::consensus_stage::{Ablation, ConsensusArgs, ConsensusRunFlags};
     use crate::mapper_stage::{MapperArgs, MapperRunFlags};
     use crate::run_options::StageFlags;
+    use crate::segmenter_stage::{SegmenterArgs, SegmenterRunFlags};
     use crate::tracker_stage::{TrackerArgs, TrackerRunFlags};
     use crate::viewer_args::ViewerArgs;
 
@@ -148,6 +149,7 @@ mod tests {
             consensus: ConsensusRunFlags {
                 ablation: vec![Ablation::NoPartDecay, Ablation::NoCounterPruning],
             },
+            segmenter: SegmenterRunFlags { min_call_ms: 2000 },
             viewer: ViewerArgs {
                 rerun: Some("/tmp/a run.rrd".into()),
                 rerun_connect: Some("rerun+http://laptop:9876/proxy".into()),
@@ -161,17 +163,20 @@ mod tests {
         assert_eq!(consensus.run, flags.consensus);
         let viewer: ViewerArgs = parse(&flags.for_stage(stage_names::VIEWER));
         assert_eq!(viewer, flags.viewer);
+        let segmenter: SegmenterArgs = parse(&flags.for_stage(stage_names::SEGMENTER));
+        assert_eq!(segmenter.run, flags.segmenter);
         // Defaults write nothing, so a deploy file's own arguments stand alone.
         let none = StageFlags::default();
         for name in [
             stage_names::TRACKER,
             stage_names::MAPPER,
             stage_names::CONSENSUS,
+            stage_names::SEGMENTER,
             stage_names::VIEWER,
         ] {
             assert!(none.for_stage(name).is_empty(), "{name}");
         }
-        assert!(flags.for_stage(stage_names::SEGMENTER).is_empty());
+        assert!(flags.for_stage(stage_names::SENSOR).is_empty());
     }
 
     #[test]

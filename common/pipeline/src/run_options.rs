@@ -6,6 +6,7 @@ use std::path::PathBuf;
 use crate::consensus_stage::ConsensusRunFlags;
 use crate::deploy::{stage_names, DeployFile};
 use crate::mapper_stage::MapperRunFlags;
+use crate::segmenter_stage::SegmenterRunFlags;
 use crate::tracker_stage::TrackerRunFlags;
 use crate::viewer_args::ViewerArgs;
 use crate::DatasetArgs;
@@ -38,6 +39,7 @@ pub struct StageFlags {
     pub tracker: TrackerRunFlags,
     pub mapper: MapperRunFlags,
     pub consensus: ConsensusRunFlags,
+    pub segmenter: SegmenterRunFlags,
     /// `--rerun` / `--rerun-connect`: they also decide whether the viewer stage starts.
     pub viewer: ViewerArgs,
 }
@@ -49,6 +51,7 @@ impl StageFlags {
             stage_names::TRACKER => self.tracker.to_args(),
             stage_names::MAPPER => self.mapper.to_args(),
             stage_names::CONSENSUS => self.consensus.to_args(),
+            stage_names::SEGMENTER => self.segmenter.to_args(),
             stage_names::VIEWER => self.viewer.to_args(),
             _ => Vec::new(),
         }

@@ -22,6 +22,9 @@ pub struct RunRecord {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct StageRecord {
     pub name: String,
+    /// Which of the stage's processes (0 for the first, and for runs before replicas).
+    #[serde(default)]
+    pub replica: u32,
     pub restarts: u32,
     /// Of the restarts, those after the watchdog found it hung (silent past its `watchdog_s`).
     #[serde(default)]
@@ -79,6 +82,7 @@ mod tests {
             frames_total: Some(30),
             stages: vec![StageRecord {
                 name: "tracker".into(),
+                replica: 0,
                 restarts: 1,
                 hangs: 1,
                 processed: 29,

@@ -1,8 +1,12 @@
 //! The segmenter stage: the newest keyframe in (older ones dropped, so a slow
 //! segmenter never holds the pipeline back), a label map with confidences and
 //! the input Label-Class table out (docs/METHOD.md §6).
+//!
+//! Several processes of this stage (replicas, `replicas = N` in the deploy file) share the
+//! keyframes: each takes the newest keyframe no other replica has claimed
+//! ([`crate::keyframe_claims`]), so none is segmented twice.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::sync::mpsc::RecvTimeoutError;
 use std::time::{Duration, Instant};
 
@@ -15,10 +19,11 @@ use opengs_perception::{
     SegmenterOptions, SimulatedParams,
 };
 use opengs_runtime::{
-    waitset, CallbackProgression, Inlet, Outlet, RunContext, TelemetrySink, WaitSetRunResult,
-    HEARTBEAT,
+    waitset, CallbackProgression, Inlet, Outlet, Received, RunContext, TelemetrySink,
+    WaitSetRunResult, HEARTBEAT,
 };
 
+use crate::keyframe_claims::KeyframeClaims;
 use crate::DatasetArgs;
 
 /// Options of the segmenter stage.
@@ -59,9 +64,30 @@ pub struct SegmenterArgs {
     #[arg(long, default_value_t = 300.0, value_parser = crate::cli_values::positive)]
     pub longest_call_s: f64,
     #[command(flatten)]
+    pub run: SegmenterRunFlags,
+    #[command(flatten)]
     pub simulated: SimulatedArgs,
     #[command(flatten)]
     pub dataset: DatasetArgs,
+}
+
+/// The segmenter's flags that `opengs run` sets ([`crate::run_options::StageFlags`]).
+#[derive(clap::Args, Debug, Clone, Default, PartialEq)]
+pub struct SegmenterRunFlags {
+    /// Stand-in for a slow model (tests and benchmarks of replicas on a small machine): each
+    /// keyframe takes at least this many milliseconds, whatever the kind; the process sleeps
+    /// out the rest, so the wait costs no CPU. 0 = as fast as the kind is.
+    #[arg(long, default_value_t = 0)]
+    pub min_call_ms: u64,
+}
+
+impl SegmenterRunFlags {
+    pub fn to_args(&self) -> Vec<String> {
+        match self.min_call_ms {
+            0 => Vec::new(),
+            ms => vec!["--min-call-ms".into(), ms.to_string()],
+        }
+    }
 }
 
 /// `simulated`'s failure modes (defaults: opengs_perception::SimulatedParams, SAM-like).
@@ -105,8 +131,13 @@ impl SimulatedArgs {
     }
 }
 
-/// Runs the segmenter stage until a termination signal.
-pub fn run_segmenter(ctx: &RunContext, args: &SegmenterArgs) -> anyhow::Result<()> {
+/// Runs the segmenter stage until a termination signal. With `run_dir`, it claims each
+/// keyframe it takes there, so replicas of the stage share the keyframes out.
+pub fn run_segmenter(
+    ctx: &RunContext,
+    run_dir: Option<&Path>,
+    args: &SegmenterArgs,
+) -> anyhow::Result<()> {
     let kind: SegmenterKind = args.kind.parse()?;
     let options = SegmenterOptions {
         sam_models: match (&args.encoder, &args.decoder) {
@@ -147,6 +178,27 @@ pub fn run_segmenter(ctx: &RunContext, args: &SegmenterArgs) -> anyhow::Result<(
         .attach_interval(HEARTBEAT)
         .map_err(|e| anyhow::anyhow!("WaitSet: {e:?}"))?;
     let longest_call = Duration::from_secs_f64(args.longest_call_s);
+    let shortest_call = Duration::from_millis(args.run.min_call_ms);
+    let pid = std::process::id();
+    let mut claims = match run_dir {
+        Some(dir) => {
+            let dir = opengs_eval::RunDir::new(dir).segmenter_claims();
+            let owner = format!("{pid} {}", segmenter.name());
+            match KeyframeClaims::open(&dir, &owner) {
+                Ok(c) => Some(c),
+                // Alone it needs no claims; replicas would then segment the same keyframes.
+                Err(e) => {
+                    tracing::warn!(
+                        "{}: {e}; keyframes are not claimed (replicas of this stage would \
+                         segment the same ones)",
+                        dir.display()
+                    );
+                    None
+                }
+            }
+        }
+        None => None,
+    };
     telemetry.ready();
     loop {
         match ws.wait_and_process_once(|_| CallbackProgression::Continue) {
@@ -160,12 +212,10 @@ pub fn run_segmenter(ctx: &RunContext, args: &SegmenterArgs) -> anyhow::Result<(
             tracing::debug!("{e}");
         }
         keyframes.clear_wakeups();
-        let (newest, skipped) = keyframes.receive_newest()?;
-        let Some(sample) = newest else { continue };
+        let Some(sample) = take_keyframe(&keyframes, &mut claims)? else {
+            continue;
+        };
         let h = sample.user_header();
-        if skipped > 0 {
-            tracing::debug!("{skipped} older keyframes dropped");
-        }
         let start = now_ns();
         let view = match h.decode(sample.payload()) {
             Ok(v) => v,
@@ -186,7 +236,14 @@ pub fn run_segmenter(ctx: &RunContext, args: &SegmenterArgs) -> anyhow::Result<(
             gt_labels: view.labels,
             classes: &classes,
         };
-        let seg = match segment_alive(segmenter.as_mut(), &input, &telemetry, longest_call) {
+        let seg = segment_alive(segmenter.as_mut(), &input, &telemetry, longest_call);
+        // The slow-model stand-in: heartbeats go on while it waits.
+        while Duration::from_nanos(now_ns().saturating_sub(start)) < shortest_call {
+            let left = shortest_call - Duration::from_nanos(now_ns().saturating_sub(start));
+            std::thread::sleep(left.min(HEARTBEAT));
+            telemetry.alive();
+        }
+        let seg = match seg {
             Ok(s) => s,
             Err(e) => {
                 // A frame the segmenter cannot handle is skipped, not fatal.
@@ -206,6 +263,44 @@ pub fn run_segmenter(ctx: &RunContext, args: &SegmenterArgs) -> anyhow::Result<(
             SegmentsHeader::new(stamp, seg.width, seg.height, labels.len() as u32, kind_id);
         segments.send(header, |hd, buf| hd.encode(&seg.label_map, &labels, buf))?;
         telemetry.processed(&h.stamp, start, now_ns());
+    }
+}
+
+/// The newest waiting keyframe that no other replica has claimed, claimed for this one (older
+/// ones are left: another replica may take them, or nobody, when all are busy).
+fn take_keyframe(
+    keyframes: &Inlet<KeyframeHeader>,
+    claims: &mut Option<KeyframeClaims>,
+) -> anyhow::Result<Option<Received<KeyframeHeader>>> {
+    let (mut newest, mut older, mut taken) = (None, 0, 0);
+    while let Some(sample) = keyframes.receive()? {
+        let seq = sample.user_header().stamp.seq;
+        if claims.as_ref().is_some_and(|c| c.is_claimed(seq)) {
+            taken += 1;
+        } else if newest.replace(sample).is_some() {
+            older += 1;
+        }
+    }
+    if older + taken > 0 {
+        tracing::debug!("{older} older keyframes left, {taken} taken by other replicas");
+    }
+    let Some(sample) = newest else {
+        return Ok(None);
+    };
+    let seq = sample.user_header().stamp.seq;
+    let Some(c) = claims.as_mut() else {
+        return Ok(Some(sample));
+    };
+    match c.claim(seq) {
+        Ok(true) => Ok(Some(sample)),
+        Ok(false) => {
+            tracing::debug!("keyframe #{seq}: another replica was first");
+            Ok(None)
+        }
+        Err(e) => {
+            tracing::warn!("keyframe #{seq}: cannot claim it ({e}); segmenting it anyway");
+            Ok(Some(sample))
+        }
     }
 }
 

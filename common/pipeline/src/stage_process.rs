@@ -24,11 +24,16 @@ pub enum StageState {
     /// Dead with no restarts left.
     Failed,
     Stopped,
+    /// Asked to stop for good by `opengs ctl scale` (never restarted); after its current
+    /// message, or killed after [`crate::swap::RETIRE_GRACE`].
+    Retired,
 }
 
 /// A stage process and its restart bookkeeping.
 pub struct StageProcess {
     pub spec: StageSpec,
+    /// Which of the stage's processes this is (0 for the first; replicas count up).
+    pub replica: u32,
     pub state: StageState,
     pub restarts: u32,
     pub processed: u64,
@@ -45,7 +50,17 @@ pub struct StageProcess {
     /// Times the watchdog killed it.
     pub hangs: u32,
     restart_at: Option<Instant>,
+    /// When it was asked to stop for good ([`StageState::Retired`]).
+    retired_at: Option<Instant>,
     log_path: PathBuf,
+}
+
+/// `name`, or `name#N` for replica N ≥ 1.
+pub fn replica_label(name: &str, replica: u32) -> String {
+    match replica {
+        0 => name.to_string(),
+        n => format!("{name}#{n}"),
+    }
 }
 
 /// Finds a stage executable: an explicit path, else beside the running `opengs`, else on PATH.
@@ -75,9 +90,15 @@ pub fn resolve_binary(binary: &str) -> PathBuf {
 
 impl StageProcess {
     pub fn new(spec: StageSpec, log_dir: &Path) -> Self {
-        let log_path = log_dir.join(format!("{}.log", spec.name));
+        Self::replica(spec, log_dir, 0)
+    }
+
+    /// Process number `replica` of the stage (`replicas` in the deploy file).
+    pub fn replica(spec: StageSpec, log_dir: &Path, replica: u32) -> Self {
+        let log_path = log_dir.join(format!("{}.log", replica_label(&spec.name, replica)));
         Self {
             spec,
+            replica,
             state: StageState::Starting,
             restarts: 0,
             processed: 0,
@@ -90,8 +111,32 @@ impl StageProcess {
             silence: SilenceClock::new(Instant::now()),
             hangs: 0,
             restart_at: None,
+            retired_at: None,
             log_path,
         }
+    }
+
+    /// The stage's name, with `#N` for replicas after the first (`segmenter#2`).
+    pub fn label(&self) -> String {
+        replica_label(&self.spec.name, self.replica)
+    }
+
+    /// Asks it to stop for good after its current message (`opengs ctl scale` down).
+    pub fn retire(&mut self) {
+        self.signal(opengs_runtime::STOP_SIGNAL);
+        self.state = StageState::Retired;
+        self.retired_at = Some(Instant::now());
+    }
+
+    /// Retired, still running past `grace`: killed (it was stuck in one message).
+    pub fn retire_overdue(&mut self, grace: Duration) -> bool {
+        let overdue = self.state == StageState::Retired
+            && self.child.is_some()
+            && self.retired_at.is_some_and(|t| t.elapsed() > grace);
+        if overdue {
+            self.signal(libc::SIGKILL);
+        }
+        overdue
     }
 
     pub fn pid(&self) -> Option<u32> {
@@ -116,7 +161,7 @@ impl StageProcess {
             .map_err(|e| {
                 anyhow::anyhow!(
                     "stage {}: log file {}: {e}",
-                    self.spec.name,
+                    self.label(),
                     self.log_path.display()
                 )
             })?;
@@ -163,7 +208,7 @@ impl StageProcess {
         let child = cmd.spawn().map_err(|e| {
             anyhow::anyhow!(
                 "stage {}: cannot start {}: {e}",
-                self.spec.name,
+                self.label(),
                 binary.display()
             )
         })?;
@@ -187,7 +232,7 @@ impl StageProcess {
             }
             Ok(None) => None,
             Err(e) => {
-                tracing::warn!("stage {}: wait failed: {e}", self.spec.name);
+                tracing::warn!("stage {}: wait failed: {e}", self.label());
                 None
             }
         }
@@ -262,7 +307,7 @@ impl StageProcess {
     /// SIGTERM without waiting: the stage ends after the message it is working on.
     pub fn request_stop(&mut self) {
         self.signal(opengs_runtime::STOP_SIGNAL);
-        if self.state != StageState::Finished {
+        if !matches!(self.state, StageState::Finished | StageState::Retired) {
             self.state = StageState::Stopped;
         }
     }
@@ -284,7 +329,7 @@ impl StageProcess {
                 _ => {
                     tracing::warn!(
                         "stage {} did not stop in {grace:?}; killing it",
-                        self.spec.name
+                        self.label()
                     );
                     let _ = child.kill();
                     let _ = child.wait();
@@ -292,7 +337,7 @@ impl StageProcess {
                 }
             }
         }
-        if self.state != StageState::Finished {
+        if !matches!(self.state, StageState::Finished | StageState::Retired) {
             self.state = StageState::Stopped;
         }
     }

@@ -5,6 +5,9 @@ use serde::{Deserialize, Serialize};
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 pub struct StageStatus {
     pub name: String,
+    /// Which of the stage's processes (0 for the first; `replicas`, `opengs ctl scale`).
+    #[serde(default)]
+    pub replica: u32,
     pub pid: Option<u32>,
     pub state: String,
     pub restarts: u32,
@@ -38,9 +41,15 @@ impl PipelineStatus {
             "stage", "kind", "pid", "state", "restarts", "processed", "last seq"
         ));
         for st in &self.stages {
+            // A stage with several processes lists each as the latency profile does: NAME#N.
+            let replicated = self.stages.iter().filter(|o| o.name == st.name).count() > 1;
+            let name = match replicated {
+                true => format!("{}#{}", st.name, st.replica),
+                false => st.name.clone(),
+            };
             s.push_str(&format!(
                 "{:<12} {:<12} {:>8} {:<11} {:>8} {:>10} {:>9}\n",
-                st.name,
+                name,
                 st.kind.as_deref().unwrap_or("-"),
                 st.pid.map_or("-".into(), |p| p.to_string()),
                 st.state,

@@ -4,6 +4,7 @@
 //! order. It hands back what it collected ([`Supervised`]); [`crate::run`] writes the outputs
 //! and scores them.
 
+use std::collections::BTreeSet;
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
@@ -24,6 +25,7 @@ use crate::progress::Progress;
 use crate::recorder::Recorder;
 use crate::run_options::{RunOptions, StageFlags};
 use crate::run_record::StageRecord;
+use crate::scale::{Scale, ScaleOutcome};
 use crate::service_notify::ServiceNotifier;
 use crate::stage_process::{StageProcess, StageState};
 use crate::status::{PipelineStatus, StageStatus};
@@ -58,12 +60,14 @@ pub struct Supervised {
 }
 
 impl Supervised {
-    /// Messages the stage `name` processed (0 when there is no such stage).
+    /// Messages the stage `name` processed, all its replicas together (0 when there is no
+    /// such stage).
     pub fn processed(&self, name: &str) -> u64 {
         self.stages
             .iter()
-            .find(|s| s.name == name)
-            .map_or(0, |s| s.processed)
+            .filter(|s| s.name == name)
+            .map(|s| s.processed)
+            .sum()
     }
 }
 
@@ -97,6 +101,7 @@ impl Supervisor {
             run_dir.label_table(),
             run_dir.consensus_progress(),
             run_dir.mapper_keyframes(),
+            run_dir.segmenter_claims(),
         ] {
             let removed = match stale.is_dir() {
                 true => std::fs::remove_dir_all(&stale),
@@ -192,6 +197,9 @@ struct RunState {
     dataset_args: Vec<String>,
     log_dir: PathBuf,
     swap: Option<Swap>,
+    scale: Option<Scale>,
+    /// Stages that run (or ran) more than one process: the latency profile shows each.
+    replicated: BTreeSet<String>,
     /// The dataset selection, for the run record the snapshots write.
     dataset: crate::DatasetArgs,
     last_snapshot: Instant,
@@ -230,7 +238,8 @@ impl RunState {
             out_dir: opts.out_dir.clone(),
             stages: crate::viewer_args::stages_to_start(&opts.deploy, &opts.stage_flags.viewer)
                 .into_iter()
-                .map(|s| StageProcess::new(s, &log_dir))
+                .flat_map(|s| (0..s.replicas).map(move |r| (s.clone(), r)))
+                .map(|(s, r)| StageProcess::replica(s, &log_dir, r))
                 .collect(),
             stage_flags: opts.stage_flags.clone(),
             source_args,
@@ -242,8 +251,16 @@ impl RunState {
             total_frames,
             progress: opts.progress.then(|| Progress::new(total_frames)),
             dataset_args: opts.dataset.to_args(),
+            replicated: opts
+                .deploy
+                .stages
+                .iter()
+                .filter(|s| s.replicas > 1)
+                .map(|s| s.name.clone())
+                .collect(),
             log_dir,
             swap: None,
+            scale: None,
             dataset: opts.dataset.clone(),
             last_snapshot: Instant::now(),
             service: ServiceNotifier::from_env(),
@@ -337,6 +354,7 @@ impl RunState {
             .iter()
             .map(|s| StageRecord {
                 name: s.spec.name.clone(),
+                replica: s.replica,
                 restarts: s.restarts,
                 hangs: s.hangs,
                 processed: s.processed,
@@ -345,8 +363,11 @@ impl RunState {
             .collect()
     }
 
+    /// The stage's first process still doing its work (replica 0 unless scaled).
     fn stage_index(&self, name: &str) -> Option<usize> {
-        self.stages.iter().position(|s| s.spec.name == name)
+        crate::scale::active_replicas(&self.stages, name)
+            .first()
+            .copied()
     }
 
     /// Starts each stage in deploy order and waits until it reports ready.
@@ -370,7 +391,7 @@ impl RunState {
             }
             self.note(&format!(
                 "starting {} (pid {})",
-                self.stages[i].spec.name,
+                self.stages[i].label(),
                 self.stages[i].pid().unwrap_or(0)
             ));
             // An optional stage never holds the pipeline's start up for long.
@@ -385,7 +406,7 @@ impl RunState {
                 }
                 match ws.wait_and_process_once(|_| CallbackProgression::Continue) {
                     Ok(WaitSetRunResult::TerminationRequest | WaitSetRunResult::Interrupt) => {
-                        anyhow::bail!("interrupted while starting {}", self.stages[i].spec.name)
+                        anyhow::bail!("interrupted while starting {}", self.stages[i].label())
                     }
                     Err(e) => anyhow::bail!("WaitSet: {e:?}"),
                     Ok(_) => {}
@@ -394,7 +415,7 @@ impl RunState {
                 if let Some(status) = self.stages[i].poll_exit() {
                     break Some(format!(
                         "stage {} exited during start-up ({status}); its log {} ends with:\n{}",
-                        self.stages[i].spec.name,
+                        self.stages[i].label(),
                         self.stages[i].log_path().display(),
                         self.stages[i].log_tail(15)
                     ));
@@ -402,7 +423,7 @@ impl RunState {
                 if Instant::now() > deadline {
                     break Some(format!(
                         "stage {} did not report ready within {timeout_s} s; see {}",
-                        self.stages[i].spec.name,
+                        self.stages[i].label(),
                         self.stages[i].log_path().display()
                     ));
                 }
@@ -455,6 +476,7 @@ impl RunState {
                 return Ok(Ending::StopRequested);
             }
             self.advance_swap(ch);
+            self.advance_scale(ch);
             if let Some(failed) = self.watch_children(ctx)? {
                 return Ok(failed);
             }
@@ -504,7 +526,19 @@ impl RunState {
                 }
             };
             let name = h.stage_name().to_string();
-            let Some(i) = self.stage_index(&name) else {
+            if event == TelemetryEvent::Ready
+                && self.scale.as_mut().is_some_and(|s| s.observe_ready(h.pid))
+            {
+                continue;
+            }
+            // Replicas share a name: the pid says which (else the stage's first process: a
+            // swap's new process before it takes the stage's place, or a retired one's last).
+            let Some(i) = self
+                .stages
+                .iter()
+                .position(|s| s.spec.name == name && s.pid() == Some(h.pid))
+                .or_else(|| self.stage_index(&name))
+            else {
                 continue;
             };
             self.stages[i].heard_from(h.pid);
@@ -518,7 +552,7 @@ impl RunState {
             let stage = &mut self.stages[i];
             match event {
                 TelemetryEvent::Ready => {
-                    if stage.state != StageState::Ready {
+                    if matches!(stage.state, StageState::Starting | StageState::Restarting) {
                         stage.state = StageState::Ready;
                     }
                 }
@@ -534,9 +568,20 @@ impl RunState {
                         end_ns: h.end_ns,
                     };
                     self.profile.record(&name, &s);
-                    self.trace.record(&name, h.pid, &s);
+                    // The stage's row counts every replica; each has a row of its own too.
+                    if self.replicated.contains(&name) {
+                        self.profile
+                            .record(&format!("{name}#{}", stage.replica), &s);
+                    }
+                    self.trace.record(&stage.label(), h.pid, &s);
                 }
-                TelemetryEvent::Dropped => self.profile.record_drop(&name),
+                TelemetryEvent::Dropped => {
+                    self.profile.record_drop(&name);
+                    if self.replicated.contains(&name) {
+                        self.profile
+                            .record_drop(&format!("{name}#{}", stage.replica));
+                    }
+                }
                 TelemetryEvent::Progress => stage.work = Some((h.work_done, h.work_total)),
                 TelemetryEvent::Heartbeat => {}
                 TelemetryEvent::Finished => {
@@ -591,6 +636,11 @@ impl RunState {
                     Ok(()) => continue,
                     Err(e) => (false, serde_json::Value::String(e).to_string()),
                 },
+                ControlCommand::Scale => match self.begin_scale(view.text, view.request_id) {
+                    // The reply goes out when the new replicas are ready, the old ones gone.
+                    Ok(()) => continue,
+                    Err(e) => (false, serde_json::Value::String(e).to_string()),
+                },
                 ControlCommand::Reply => continue,
             };
             let reply = ControlHeader::new(ControlCommand::Reply, view.request_id, ok, &text);
@@ -610,9 +660,19 @@ impl RunState {
         if self.swap.is_some() {
             return Err("a swap is already in progress".into());
         }
+        if self.scale.is_some() {
+            return Err("a scale is in progress; swap once it is over".into());
+        }
         let index = self
             .stage_index(stage)
             .ok_or_else(|| format!("no stage '{stage}' in this pipeline"))?;
+        let replicas = crate::scale::active_replicas(&self.stages, stage).len();
+        if replicas > 1 {
+            return Err(format!(
+                "stage '{stage}' runs {replicas} replicas; scale it to 1 first \
+                 (opengs ctl scale {stage} --to 1), swap, then scale it up again"
+            ));
+        }
         let current = &self.stages[index];
         let Some(from) = current.spec.kind.clone() else {
             return Err(format!("stage '{stage}' has no kinds to swap"));
@@ -631,6 +691,78 @@ impl RunState {
         ));
         self.swap = Some(Swap::new(index, request_id, &from, process));
         Ok(())
+    }
+
+    /// Starts a `scale STAGE N` request (see [`crate::scale`]): new replicas spawned, or the
+    /// newest ones asked to stop.
+    fn begin_scale(&mut self, text: &str, request_id: u64) -> Result<(), String> {
+        let mut words = text.split_whitespace();
+        let (Some(stage), Some(to), None) = (words.next(), words.next(), words.next()) else {
+            return Err(format!("scale needs 'STAGE N', got '{text}'"));
+        };
+        let to: u32 = to
+            .parse()
+            .map_err(|_| format!("scale: '{to}' is not a number of replicas"))?;
+        if self.swap.is_some() || self.scale.is_some() {
+            return Err("a swap or scale is in progress; scale once it is over".into());
+        }
+        let requested = Instant::now();
+        let plan = crate::scale::plan(&self.stages, stage, to)?;
+        let first = self
+            .stage_index(stage)
+            .ok_or_else(|| format!("stage '{stage}' has no process running"))?;
+        let spec = self.stages[first].spec.clone();
+        let mut started = Vec::new();
+        for &replica in &plan.add {
+            let mut p = StageProcess::replica(spec.clone(), &self.log_dir, replica);
+            let args = self.args_for_process(&p);
+            if let Err(e) = p.spawn(&args) {
+                // Those spawned already are dropped (killed) with `started`.
+                return Err(format!("scale {stage}: {e:#}"));
+            }
+            self.note(&format!(
+                "scale {stage}: starting {} (pid {})",
+                p.label(),
+                p.pid().unwrap_or(0)
+            ));
+            started.push(p);
+        }
+        if to > 1 {
+            self.replicated.insert(stage.to_string());
+        }
+        let scale = Scale::new(
+            &mut self.stages,
+            stage,
+            &plan,
+            (to, request_id, requested),
+            started,
+        );
+        for &i in &plan.retire {
+            self.note(&format!(
+                "scale {stage}: retiring {} (pid {}) after its current keyframe",
+                self.stages[i].label(),
+                self.stages[i].pid().unwrap_or(0)
+            ));
+        }
+        self.scale = Some(scale);
+        Ok(())
+    }
+
+    /// Moves a pending scale on, and answers its `ctl scale` once it is over.
+    fn advance_scale(&mut self, ch: &Channels) {
+        let Some(scale) = &mut self.scale else { return };
+        let mut notes = Vec::new();
+        let timeout = Duration::from_secs_f64(self.deploy.startup_timeout_s);
+        let done = scale.advance(&mut self.stages, timeout, &mut notes);
+        let request_id = scale.request_id;
+        for n in notes {
+            self.note(&n);
+        }
+        if let Some(outcome) = done {
+            self.scale = None;
+            self.note(&outcome.describe());
+            reply_scale(ch, request_id, &outcome);
+        }
     }
 
     /// Moves a pending swap on, and answers its `ctl swap` once it is over.
@@ -666,6 +798,7 @@ impl RunState {
                 .iter()
                 .map(|s| StageStatus {
                     name: s.spec.name.clone(),
+                    replica: s.replica,
                     pid: s.is_running().then(|| s.pid()).flatten(),
                     state: serde_json::to_value(s.state)
                         .ok()
@@ -686,11 +819,25 @@ impl RunState {
     /// restarts, or stopped on bad input.
     fn watch_children(&mut self, ctx: &RunContext) -> anyhow::Result<Option<Ending>> {
         for i in 0..self.stages.len() {
+            if self.stages[i].state == StageState::Retired {
+                if self.stages[i].retire_overdue(crate::swap::RETIRE_GRACE) {
+                    self.note(&format!(
+                        "{} (retired) still busy after {:?}: killed",
+                        self.stages[i].label(),
+                        crate::swap::RETIRE_GRACE
+                    ));
+                }
+                if let Some(status) = self.stages[i].poll_exit() {
+                    self.note(&format!("{} retired ({status})", self.stages[i].label()));
+                    ctx.cleanup_dead_nodes();
+                }
+                continue;
+            }
             if let Some(silent) = self.stages[i].silent_for() {
                 self.note(&format!(
                     "stage {} (pid {}) sent nothing for {:.1} s (watchdog_s {}): hung or stopped; \
                      killing it",
-                    self.stages[i].spec.name,
+                    self.stages[i].label(),
                     self.stages[i].pid().unwrap_or(0),
                     silent.as_secs_f64(),
                     self.stages[i].spec.watchdog_s
@@ -698,7 +845,7 @@ impl RunState {
                 self.stages[i].kill_hung();
             }
             if let Some(status) = self.stages[i].poll_exit() {
-                let name = self.stages[i].spec.name.clone();
+                let name = self.stages[i].label();
                 let clean = status.success();
                 if clean && self.stages[i].spec.role == StageRole::Source {
                     self.stages[i].state = StageState::Finished;
@@ -744,7 +891,7 @@ impl RunState {
                 self.stages[i].spawn(&args)?;
                 self.note(&format!(
                     "restarted {} (pid {}, restart {}/{})",
-                    self.stages[i].spec.name,
+                    self.stages[i].label(),
                     self.stages[i].pid().unwrap_or(0),
                     self.stages[i].restarts,
                     self.stages[i].spec.restart_limit
@@ -902,6 +1049,10 @@ impl RunState {
             let request_id = swap.request_id;
             reply_swap(ch, request_id, &swap.abandon());
         }
+        if let Some(scale) = self.scale.take() {
+            let request_id = scale.request_id;
+            reply_scale(ch, request_id, &scale.abandon(&self.stages));
+        }
         let order: Vec<usize> = (0..self.stages.len()).rev().collect();
         for i in order {
             if self.stages[i].is_running() {
@@ -924,6 +1075,15 @@ impl RunState {
             Some(p) => p.println(msg),
             None => eprintln!("{msg}"),
         }
+    }
+}
+
+/// Answers a `ctl scale` with its outcome (JSON), ok only when the scale succeeded.
+fn reply_scale(ch: &Channels, request_id: u64, outcome: &ScaleOutcome) {
+    let body = serde_json::to_string(outcome).unwrap_or_default();
+    let reply = ControlHeader::new(ControlCommand::Reply, request_id, outcome.ok, &body);
+    if let Err(e) = ch.replies.send(reply, |h, buf| h.encode(&body, buf)) {
+        tracing::warn!("control reply: {e}");
     }
 }
 

@@ -117,6 +117,7 @@ pub fn viewer_stage() -> StageSpec {
         finish_timeout_s: 0.0,
         watchdog_s: VIEWER_WATCHDOG_S,
         optional: true,
+        replicas: 1,
     }
 }
 

@@ -110,7 +110,7 @@ impl ChromeTrace {
         out
     }
 
-    /// Writes `{"traceEvents": [...]}`.
+    /// Writes `{"traceEvents": [...], "otherData": {"origin_ns": "..."}}`.
     pub fn write(&self, path: &Path) -> std::io::Result<()> {
         let mut out = std::io::BufWriter::new(std::fs::File::create(path)?);
         out.write_all(b"{\"traceEvents\":[\n")?;
@@ -120,7 +120,13 @@ impl ChromeTrace {
             }
             serde_json::to_writer(&mut out, ev).map_err(std::io::Error::other)?;
         }
-        out.write_all(b"\n],\"displayTimeUnit\":\"ms\"}\n")?;
+        // The clock reading (CLOCK_MONOTONIC ns, as a string: exact) that ts 0 stands for, so
+        // a tool can place its own events (a `ctl scale` request) on the trace's time line.
+        let origin = self.origin_ns.unwrap_or(0);
+        write!(
+            out,
+            "\n],\"displayTimeUnit\":\"ms\",\"otherData\":{{\"origin_ns\":\"{origin}\"}}}}\n"
+        )?;
         out.flush()
     }
 }
@@ -245,6 +251,31 @@ mod tests {
             serde_json::from_str(&std::fs::read_to_string(&path).expect("read")).expect("json");
         std::fs::remove_file(&path).ok();
         v["traceEvents"].as_array().expect("array").clone()
+    }
+
+    #[test]
+    fn the_file_says_which_clock_reading_ts_zero_is() {
+        let mut t = ChromeTrace::default();
+        t.record("segmenter", 5, &sample(3, 250, 260, 2260));
+        t.record("consensus", 6, &sample(3, 2270, 2270, 2300));
+        let path = std::env::temp_dir().join(format!("opengs-origin-{}.json", std::process::id()));
+        t.write(&path).expect("write");
+        let v: Value =
+            serde_json::from_str(&std::fs::read_to_string(&path).expect("read")).expect("json");
+        std::fs::remove_file(&path).ok();
+        assert_eq!(v["otherData"]["origin_ns"], "250000");
+        let seg = v["traceEvents"]
+            .as_array()
+            .expect("array")
+            .iter()
+            .find(|e| e["ph"] == "X" && e["cat"] == "segmenter")
+            .expect("segmenter span")
+            .clone();
+        // ts 10 µs after the origin: 260 µs on the clock.
+        assert_eq!(
+            (seg["ts"].as_f64(), seg["dur"].as_f64()),
+            (Some(10.0), Some(2000.0))
+        );
     }
 
     #[test]

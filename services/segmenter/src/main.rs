@@ -1,4 +1,5 @@
-//! Segmenter stage: label maps with confidences and classes for the newest keyframe.
+//! Segmenter stage: label maps with confidences and classes for the newest keyframe (no other
+//! replica has taken).
 
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -13,7 +14,7 @@ struct Args {
     /// Run id that namespaces this run's shared-memory services.
     #[arg(long)]
     run_id: String,
-    /// Run directory (unused by the segmenter; every stage accepts it).
+    /// Run directory: replicas of the stage claim keyframes there, so each is segmented once.
     #[arg(long)]
     out: Option<PathBuf>,
     #[command(flatten)]
@@ -23,6 +24,6 @@ struct Args {
 fn main() -> ExitCode {
     let args = Args::parse();
     stage_main("segmenter", &args.run_id, |ctx| {
-        run_segmenter(ctx, &args.segmenter)
+        run_segmenter(ctx, args.out.as_deref(), &args.segmenter)
     })
 }

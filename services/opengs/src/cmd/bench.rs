@@ -21,6 +21,9 @@ enum BenchWhat {
     /// optimisation) and SIGSTOPped, the supervisor SIGKILLed; every run against the
     /// fault-free one (ATE, PSNR, mIoU, poses, restarts, hangs).
     Faults(super::bench_faults::BenchFaultsArgs),
+    /// Segmenter replicas with a segmenter held to a fixed time per keyframe: keyframes
+    /// segmented with 1, 2, 4 replicas, mIoU, and `ctl scale` during a run (the gap it leaves).
+    Replicas(super::bench_replicas::BenchReplicasArgs),
     /// G-ICP registration time and tracker throughput.
     Gicp(super::bench_gicp::BenchGicpArgs),
     /// The tracker alone over a dataset, one frame at a time: per-frame time percentiles,
@@ -67,6 +70,7 @@ pub fn run(args: BenchArgs) -> anyhow::Result<()> {
         BenchWhat::Track(a) => super::bench_track::run(a),
         BenchWhat::Slam(a) => super::bench_slam::run(a),
         BenchWhat::Faults(a) => super::bench_faults::run(a),
+        BenchWhat::Replicas(a) => super::bench_replicas::run(a),
         BenchWhat::Map(a) => super::bench_map::run(a),
         BenchWhat::Consensus { runs } => {
             opengs_semantics::bench::print_consensus_bench(runs);

@@ -206,23 +206,18 @@ fn run_case(
     finish: usize,
     fault: Fault,
 ) -> anyhow::Result<Row> {
-    let _ = std::fs::remove_dir_all(dir);
-    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     let run_id = format!("faults{}-{index}", std::process::id());
-    let log_path = dir.with_extension("log");
-    let log = std::fs::File::create(&log_path)
-        .with_context(|| format!("creating {}", log_path.display()))?;
-    let mut child = Command::new(opengs)
-        .args(["run", "--quiet", "--run-id", &run_id])
-        .args(["--frames", &frames.to_string()])
-        .args(["--finish-steps", &finish.to_string()])
-        .arg("--out")
-        .arg(dir)
-        .stdin(Stdio::null())
-        .stdout(log.try_clone()?)
-        .stderr(log)
-        .spawn()
-        .with_context(|| format!("starting {}", opengs.display()))?;
+    let mut child = start_run(
+        opengs,
+        dir,
+        &run_id,
+        &[
+            "--frames".into(),
+            frames.to_string(),
+            "--finish-steps".into(),
+            finish.to_string(),
+        ],
+    )?;
     let mut note = String::new();
     let faulted_stage = match fault {
         Fault::None => None,
@@ -287,14 +282,39 @@ fn run_case(
     Ok(row)
 }
 
-fn read_json(path: &Path) -> anyhow::Result<serde_json::Value> {
+/// `opengs run --quiet --run-id RUN_ID --out DIR ARGS...` into a fresh `dir`, its output
+/// in `DIR.log`.
+pub(super) fn start_run(
+    opengs: &Path,
+    dir: &Path,
+    run_id: &str,
+    args: &[String],
+) -> anyhow::Result<Child> {
+    let _ = std::fs::remove_dir_all(dir);
+    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    let log_path = dir.with_extension("log");
+    let log = std::fs::File::create(&log_path)
+        .with_context(|| format!("creating {}", log_path.display()))?;
+    Command::new(opengs)
+        .args(["run", "--quiet", "--run-id", run_id])
+        .args(args)
+        .arg("--out")
+        .arg(dir)
+        .stdin(Stdio::null())
+        .stdout(log.try_clone()?)
+        .stderr(log)
+        .spawn()
+        .with_context(|| format!("starting {}", opengs.display()))
+}
+
+pub(super) fn read_json(path: &Path) -> anyhow::Result<serde_json::Value> {
     let text =
         std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
     serde_json::from_str(&text).with_context(|| format!("{}: invalid JSON", path.display()))
 }
 
 /// `opengs ctl --run ID status --json`, parsed; None while the run does not answer.
-fn status(opengs: &Path, run_id: &str) -> Option<serde_json::Value> {
+pub(super) fn status(opengs: &Path, run_id: &str) -> Option<serde_json::Value> {
     let out = Command::new(opengs)
         .args(["ctl", "--run", run_id, "status", "--json"])
         .stderr(Stdio::null())
@@ -304,7 +324,7 @@ fn status(opengs: &Path, run_id: &str) -> Option<serde_json::Value> {
 }
 
 /// Waits until the run has `n` poses; false when it ended first.
-fn wait_for_poses(
+pub(super) fn wait_for_poses(
     opengs: &Path,
     run_id: &str,
     child: &mut Child,
@@ -338,7 +358,7 @@ fn stage_pid(opengs: &Path, run_id: &str, stage: &str) -> anyhow::Result<i32> {
 }
 
 /// The exit code (None: killed by a signal), or an error after `limit`.
-fn wait_timeout(child: &mut Child, limit: Duration) -> anyhow::Result<Option<i32>> {
+pub(super) fn wait_timeout(child: &mut Child, limit: Duration) -> anyhow::Result<Option<i32>> {
     let started = Instant::now();
     loop {
         if let Some(status) = child.try_wait()? {

@@ -5,6 +5,7 @@ use std::time::Duration;
 use clap::{Args, Subcommand};
 use opengs_ipc_schema::service::{CONTROL_REPLIES, CONTROL_REQUESTS};
 use opengs_ipc_schema::{ControlCommand, ControlHeader};
+use opengs_pipeline::scale::ScaleOutcome;
 use opengs_pipeline::status::PipelineStatus;
 use opengs_pipeline::swap::SwapOutcome;
 use opengs_runtime::{
@@ -42,6 +43,17 @@ enum CtlWhat {
         #[arg(long, value_parser = crate::cmd::run::segmenter_kinds())]
         to: String,
     },
+    /// Change how many processes (replicas) of a stage share its work while the pipeline runs
+    /// (only the segmenter can). Up: new replicas start beside the running ones and join once
+    /// ready. Down: the newest replicas stop after their current keyframe (killed after a 5 s
+    /// grace period); the others never stop. Exits 0 only when the count was reached.
+    Scale {
+        /// The stage to scale, e.g. `segmenter`.
+        stage: String,
+        /// Replicas to run.
+        #[arg(long, value_parser = clap::value_parser!(u32).range(1..=opengs_pipeline::deploy::MAX_REPLICAS as i64))]
+        to: u32,
+    },
 }
 
 pub fn run(args: CtlArgs) -> anyhow::Result<()> {
@@ -74,21 +86,22 @@ pub fn run(args: CtlArgs) -> anyhow::Result<()> {
             eprintln!("swapping {stage} of run {} to {to} …", run.run_id);
             (ControlCommand::Swap, format!("{stage} {to}"), SWAP_WAIT)
         }
+        CtlWhat::Scale { stage, to } => {
+            eprintln!("scaling {stage} of run {} to {to} …", run.run_id);
+            (ControlCommand::Scale, format!("{stage} {to}"), SWAP_WAIT)
+        }
     };
     let (ok, reply) = request(&run.run_id, command, &text, wait)?;
-    if let CtlWhat::Swap { .. } = args.what {
-        // The outcome, or (refused before anything started) a plain reason.
-        return match serde_json::from_str::<SwapOutcome>(&reply) {
-            Ok(outcome) if outcome.ok => {
-                println!("{}", outcome.describe());
-                Ok(())
-            }
-            Ok(outcome) => anyhow::bail!("{}", outcome.describe()),
-            Err(_) => anyhow::bail!(
-                "the supervisor refused: {}",
-                serde_json::from_str::<String>(&reply).unwrap_or(reply)
-            ),
-        };
+    // Swaps and scales answer with their outcome, or (refused before anything started) a
+    // plain reason.
+    match args.what {
+        CtlWhat::Swap { .. } => {
+            return outcome::<SwapOutcome>(&reply, |o| (o.ok, o.describe()));
+        }
+        CtlWhat::Scale { .. } => {
+            return outcome::<ScaleOutcome>(&reply, |o| (o.ok, o.describe()));
+        }
+        _ => {}
     }
     if !ok {
         anyhow::bail!(
@@ -107,14 +120,32 @@ pub fn run(args: CtlArgs) -> anyhow::Result<()> {
             run.run_id,
             run.out_dir.display()
         ),
-        CtlWhat::Swap { .. } => {}
+        CtlWhat::Swap { .. } | CtlWhat::Scale { .. } => {}
     }
     Ok(())
 }
 
+/// Prints a swap's or scale's outcome (an error unless it succeeded), or the refusal.
+fn outcome<T: serde::de::DeserializeOwned>(
+    reply: &str,
+    ok_and_text: impl Fn(&T) -> (bool, String),
+) -> anyhow::Result<()> {
+    match serde_json::from_str::<T>(reply).map(|o| ok_and_text(&o)) {
+        Ok((true, text)) => {
+            println!("{text}");
+            Ok(())
+        }
+        Ok((false, text)) => anyhow::bail!("{text}"),
+        Err(_) => anyhow::bail!(
+            "the supervisor refused: {}",
+            serde_json::from_str::<String>(reply).unwrap_or_else(|_| reply.to_string())
+        ),
+    }
+}
+
 /// How long status and stop may take: the supervisor answers between two 100 ms ticks.
 const ANSWER_WAIT: Duration = Duration::from_secs(3);
-/// A swap answers when it is over: the new process's start (the deploy file's
+/// A swap (or scale) answers when it is over: the new process's start (the deploy file's
 /// `startup_timeout_s`), the old one's grace period and the wait for the first output
 /// (`opengs_pipeline::swap`); longer than any of that, and cut short if the run dies.
 const SWAP_WAIT: Duration = Duration::from_secs(15 * 60);

@@ -5,6 +5,7 @@ pub mod bench_gicp;
 pub mod bench_ipc;
 pub mod bench_map;
 pub mod bench_render;
+pub mod bench_replicas;
 pub mod bench_slam;
 pub mod bench_track;
 pub mod clean;

@@ -6,6 +6,7 @@ use opengs_pipeline::cli_values;
 use opengs_pipeline::consensus_stage::{Ablation, ConsensusRunFlags};
 use opengs_pipeline::deploy::stage_names;
 use opengs_pipeline::mapper_stage::MapperRunFlags;
+use opengs_pipeline::segmenter_stage::SegmenterRunFlags;
 use opengs_pipeline::tracker_stage::TrackerRunFlags;
 use opengs_pipeline::{DatasetArgs, DeployFile, RunOptions, RunSummary, StageFlags};
 
@@ -36,6 +37,15 @@ pub struct RunArgs {
     /// reference to measure the consensus), sam, mobilesamv2.
     #[arg(long, value_parser = segmenter_kinds())]
     pub segmenter: Option<String>,
+    /// Segmenter processes sharing the keyframes (1-6; default: the deploy file's `replicas`);
+    /// `opengs ctl scale segmenter --to N` changes it while the run goes on.
+    #[arg(long, value_name = "N",
+          value_parser = clap::value_parser!(u32).range(1..=opengs_pipeline::deploy::MAX_REPLICAS as i64))]
+    pub segmenter_replicas: Option<u32>,
+    /// Stand-in for a slow segmentation model (to try replicas on a small machine): each
+    /// keyframe takes the segmenter at least this many milliseconds, sleeping, whatever its kind.
+    #[arg(long, value_name = "MS", default_value_t = 0)]
+    pub segmenter_min_call_ms: u64,
     /// Switch a consensus module off (repeatable), as in the paper's ablation table.
     #[arg(long, value_enum)]
     pub ablation: Vec<Ablation>,
@@ -92,18 +102,28 @@ pub fn execute(args: &RunArgs) -> anyhow::Result<RunSummary> {
     // A SIGKILLed supervisor leaves its run's shared memory; no one else would remove it.
     crate::cmd::clean::dead_runs_at_start();
     let mut deploy = DeployFile::load(&args.deploy)?;
-    if let Some(kind) = &args.segmenter {
+    let segmenter_flags = [
+        (args.segmenter.is_some(), "--segmenter"),
+        (args.segmenter_replicas.is_some(), "--segmenter-replicas"),
+        (args.segmenter_min_call_ms > 0, "--segmenter-min-call-ms"),
+    ];
+    if let Some((_, flag)) = segmenter_flags.iter().find(|(given, _)| *given) {
         let stage = deploy
             .stages
             .iter_mut()
             .find(|s| s.name == stage_names::SEGMENTER)
             .ok_or_else(|| {
                 anyhow::anyhow!(
-                    "--segmenter: deploy file {} has no segmenter stage",
+                    "{flag}: deploy file {} has no segmenter stage",
                     args.deploy.display()
                 )
             })?;
-        stage.kind = Some(kind.clone());
+        if let Some(kind) = &args.segmenter {
+            stage.kind = Some(kind.clone());
+        }
+        if let Some(n) = args.segmenter_replicas {
+            stage.replicas = n;
+        }
     }
     // Validate the dataset here so a typo fails before any process starts.
     let spec = args.dataset.spec()?;
@@ -162,6 +182,9 @@ pub fn execute(args: &RunArgs) -> anyhow::Result<RunSummary> {
         },
         consensus: ConsensusRunFlags {
             ablation: args.ablation.clone(),
+        },
+        segmenter: SegmenterRunFlags {
+            min_call_ms: args.segmenter_min_call_ms,
         },
         viewer: args.viewer.clone(),
     };
