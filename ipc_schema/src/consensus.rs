@@ -35,7 +35,7 @@ pub struct PruneRun {
 /// Payload: consistent label map `u32[W·H]` | mapping `[u32; 2][mapping_count]` (ℓs → ℓt) |
 /// relabel runs [`PixelRun`]`[relabel_count]` | prune runs [`PruneRun`]`[prune_count]` |
 /// pixel indices `u32[pixel_count]`.
-#[derive(Debug, Clone, Copy, Default, ZeroCopySend)]
+#[derive(Debug, Clone, Copy, Default, ZeroCopySend, bytemuck::Pod, bytemuck::Zeroable)]
 #[type_name("opengs::ConsensusHeader")]
 #[repr(C)]
 pub struct ConsensusHeader {

@@ -36,7 +36,7 @@ impl ControlCommand {
 }
 
 /// A control request or reply. Payload: UTF-8 text.
-#[derive(Debug, Clone, Copy, Default, ZeroCopySend)]
+#[derive(Debug, Clone, Copy, Default, ZeroCopySend, bytemuck::Pod, bytemuck::Zeroable)]
 #[type_name("opengs::ControlHeader")]
 #[repr(C)]
 pub struct ControlHeader {

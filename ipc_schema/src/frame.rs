@@ -7,7 +7,7 @@ use crate::{MessageKind, SchemaError, Stamp};
 
 /// One RGB-D frame from the sensor.
 /// Payload: depth `u16[W·H]` | labels `u16[W·H]` (if [`FrameHeader::HAS_LABELS`]) | rgb `u8[3·W·H]`.
-#[derive(Debug, Clone, Copy, Default, ZeroCopySend)]
+#[derive(Debug, Clone, Copy, Default, ZeroCopySend, bytemuck::Pod, bytemuck::Zeroable)]
 #[type_name("opengs::FrameHeader")]
 #[repr(C)]
 pub struct FrameHeader {

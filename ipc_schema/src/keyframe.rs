@@ -13,7 +13,7 @@ pub const MAX_KEYFRAME_POINTS: u32 = 1200 * 680;
 /// A keyframe from the tracker for the mapper and the segmenter.
 /// Payload: points `f32[3n]` (world frame) | covariances `f32[6n]` (xx xy xz yy yz zz) |
 /// depth `u16[W·H]` | labels `u16[W·H]` (if [`KeyframeHeader::HAS_LABELS`]) | rgb `u8[3·W·H]`.
-#[derive(Debug, Clone, Copy, Default, ZeroCopySend)]
+#[derive(Debug, Clone, Copy, Default, ZeroCopySend, bytemuck::Pod, bytemuck::Zeroable)]
 #[type_name("opengs::KeyframeHeader")]
 #[repr(C)]
 pub struct KeyframeHeader {

@@ -21,6 +21,7 @@ mod segments;
 mod services;
 mod stamp;
 mod telemetry;
+mod wire;
 
 pub use consensus::{ConsensusHeader, ConsensusResult, ConsensusView, PixelRun, PruneRun};
 pub use control::{ControlCommand, ControlHeader, ControlRequest, ControlView};
@@ -38,6 +39,7 @@ pub mod service {
 }
 pub use stamp::{now_ns, MessageKind, Stamp, Stamped, SCHEMA_VERSION};
 pub use telemetry::{StageName, TelemetryEvent, TelemetryHeader};
+pub use wire::{from_wire, to_wire, WireIn, WireMessage};
 
 /// Largest image side we accept; bounds every size computed from a header.
 pub const MAX_IMAGE_SIDE: u32 = 8192;

@@ -10,7 +10,7 @@ pub const MAX_TARGET_GAUSSIANS: u32 = 20_000_000;
 
 /// The map's trackable Gaussians, mapper → tracker.
 /// Payload: means `f32[3n]` | rotations `f32[4n]` (w x y z) | scales `f32[3n]` (linear).
-#[derive(Debug, Clone, Copy, Default, ZeroCopySend)]
+#[derive(Debug, Clone, Copy, Default, ZeroCopySend, bytemuck::Pod, bytemuck::Zeroable)]
 #[type_name("opengs::MapTargetHeader")]
 #[repr(C)]
 pub struct MapTargetHeader {

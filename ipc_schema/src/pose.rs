@@ -40,7 +40,7 @@ impl PoseStatus {
 }
 
 /// Tracker output for every frame. No payload.
-#[derive(Debug, Clone, Copy, Default, ZeroCopySend)]
+#[derive(Debug, Clone, Copy, Default, ZeroCopySend, bytemuck::Pod, bytemuck::Zeroable)]
 #[type_name("opengs::PoseHeader")]
 #[repr(C)]
 pub struct PoseHeader {

@@ -23,7 +23,7 @@ pub struct LabelCompleteness {
 
 /// The mapper's GS Voting render at a keyframe pose (top-K stays in the mapper).
 /// Payload: label map `u32[W·H]` | [`LabelCompleteness`]`[label_count]`.
-#[derive(Debug, Clone, Copy, Default, ZeroCopySend)]
+#[derive(Debug, Clone, Copy, Default, ZeroCopySend, bytemuck::Pod, bytemuck::Zeroable)]
 #[type_name("opengs::RenderHeader")]
 #[repr(C)]
 pub struct RenderHeader {

@@ -52,7 +52,7 @@ impl SegmentLabel {
 
 /// A segmenter's output for one keyframe.
 /// Payload: label map `u32[W·H]` | labels [`SegmentLabel`]`[label_count]`.
-#[derive(Debug, Clone, Copy, Default, ZeroCopySend)]
+#[derive(Debug, Clone, Copy, Default, ZeroCopySend, bytemuck::Pod, bytemuck::Zeroable)]
 #[type_name("opengs::SegmentsHeader")]
 #[repr(C)]
 pub struct SegmentsHeader {

@@ -25,7 +25,9 @@ pub enum MessageKind {
 /// All `*_ns` fields are CLOCK_MONOTONIC nanoseconds (one clock for every
 /// process on the machine), except `capture_ns` which is the dataset/sensor
 /// capture time.
-#[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
+#[derive(
+    Debug, Clone, Copy, PartialEq, Default, ZeroCopySend, bytemuck::Pod, bytemuck::Zeroable,
+)]
 #[repr(C)]
 pub struct Stamp {
     pub version: u32,

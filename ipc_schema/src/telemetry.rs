@@ -42,7 +42,7 @@ impl TelemetryEvent {
 ///
 /// `stamp.seq`, `stamp.origin_ns` identify the source frame; queue wait is
 /// `start_ns − input_sent_ns`, processing `end_ns − start_ns`.
-#[derive(Debug, Clone, Copy, Default, ZeroCopySend)]
+#[derive(Debug, Clone, Copy, Default, ZeroCopySend, bytemuck::Pod, bytemuck::Zeroable)]
 #[type_name("opengs::TelemetryHeader")]
 #[repr(C)]
 pub struct TelemetryHeader {

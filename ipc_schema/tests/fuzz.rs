@@ -1282,6 +1282,62 @@ fn consensus_pixel_bound_of_the_largest_image_does_not_overflow() {
     ));
 }
 
+/// One input of the network link (`from_wire`) carrying target `T`: an encoded message as
+/// wire bytes, then bits flipped, bytes overwritten, cut or extended anywhere (header
+/// included). `from_wire` never panics, and accepts only what `decode` accepts.
+fn wire_case<T: Target>(rng: &mut R) -> bool
+where
+    T::H: WireMessage,
+{
+    let (h, p) = T::valid(rng);
+    let mut bytes = to_wire(&h, p.bytes());
+    for _ in 0..rng.gen_range(0..=4) {
+        match rng.gen_range(0..4) {
+            0 if !bytes.is_empty() => {
+                let i = rng.gen_range(0..bytes.len());
+                bytes[i] ^= 1 << rng.gen_range(0..8);
+            }
+            1 if bytes.len() >= 8 => {
+                let i = rng.gen_range(0..bytes.len() / 8) * 8;
+                bytes[i..i + 8].copy_from_slice(&any_u64(rng).to_ne_bytes());
+            }
+            2 => {
+                let len = rng.gen_range(0..=bytes.len());
+                bytes.truncate(len);
+            }
+            _ => bytes.extend((0..rng.gen_range(1..64)).map(|_| rng.gen::<u8>())),
+        }
+    }
+    match from_wire::<T::H>(&bytes) {
+        Ok(m) => {
+            assert!(
+                T::check(&m.header, m.payload()),
+                "from_wire accepted what decode refuses"
+            );
+            true
+        }
+        Err(_) => false,
+    }
+}
+
+#[test]
+fn fuzz_from_wire() {
+    fuzz(
+        "from_wire (network link), every message kind",
+        |rng| match rng.gen_range(0..9) {
+            0 => wire_case::<Frame>(rng),
+            1 => wire_case::<Keyframe>(rng),
+            2 => wire_case::<Segments>(rng),
+            3 => wire_case::<Render>(rng),
+            4 => wire_case::<Consensus>(rng),
+            5 => wire_case::<MapTarget>(rng),
+            6 => wire_case::<Pose>(rng),
+            7 => wire_case::<Telemetry>(rng),
+            _ => wire_case::<Control>(rng),
+        },
+    );
+}
+
 #[test]
 fn fuzz_frame_decode() {
     fuzz("FrameHeader::decode", case::<Frame>);
