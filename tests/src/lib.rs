@@ -96,6 +96,40 @@ pub fn interrupt(
 /// Kills a child on drop, so a failing assertion leaves no process behind.
 pub struct Guard(pub std::process::Child);
 
+impl Guard {
+    /// Waits for the child and collects what it wrote to its piped stdout and stderr.
+    pub fn wait_with_output(&mut self) -> std::process::Output {
+        use std::io::Read;
+        let read = |pipe: Option<Box<dyn Read + Send>>| {
+            std::thread::spawn(move || {
+                let mut text = Vec::new();
+                if let Some(mut p) = pipe {
+                    let _ = p.read_to_end(&mut text);
+                }
+                text
+            })
+        };
+        let out = read(
+            self.0
+                .stdout
+                .take()
+                .map(|p| Box::new(p) as Box<dyn Read + Send>),
+        );
+        let err = read(
+            self.0
+                .stderr
+                .take()
+                .map(|p| Box::new(p) as Box<dyn Read + Send>),
+        );
+        let status = self.0.wait().expect("wait for the child");
+        std::process::Output {
+            status,
+            stdout: out.join().unwrap_or_default(),
+            stderr: err.join().unwrap_or_default(),
+        }
+    }
+}
+
 impl Drop for Guard {
     fn drop(&mut self) {
         let _ = self.0.kill();

@@ -109,9 +109,7 @@ fn replicas_share_the_keyframes_and_scale_while_the_run_goes_on() {
         "{stdout}"
     );
 
-    let output = std::mem::replace(&mut run.0, Command::new("true").spawn().expect("true"))
-        .wait_with_output()
-        .expect("run ends");
+    let output = run.wait_with_output();
     assert!(
         output.status.success(),
         "{}",

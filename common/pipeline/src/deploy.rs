@@ -103,6 +103,14 @@ pub struct StageSpec {
     /// `opengs ctl scale` changes it while the run goes on.
     #[serde(default = "default_replicas")]
     pub replicas: u32,
+    /// The host this stage runs on, when not the one `opengs run` runs on: that host runs
+    /// it under `opengs node --host NAME`, and a bridge stage on each side carries the
+    /// services between them. The run's supervisor shows it from the telemetry it sends.
+    #[serde(default)]
+    pub host: Option<String>,
+    /// Pass the run id the hosts share (`--link RUN`): for bridge stages.
+    #[serde(default)]
+    pub link: bool,
 }
 
 fn default_replicas() -> u32 {
@@ -278,6 +286,23 @@ impl DeployFile {
                 )));
             }
             check_replicas(&s.name, s.replicas).map_err(invalid)?;
+            if let Some(h) = &s.host {
+                if h.is_empty()
+                    || h.len() > 16
+                    || !h.chars().all(|c| c.is_ascii_alphanumeric() || c == '_')
+                {
+                    return Err(invalid(format!(
+                        "stage '{}': host '{h}' must be 1-16 letters, digits or '_'",
+                        s.name
+                    )));
+                }
+                if s.role == StageRole::Source {
+                    return Err(invalid(format!(
+                        "stage '{}': the source runs on the host `opengs run` runs on (no `host`)",
+                        s.name
+                    )));
+                }
+            }
             if !names.insert(&s.name) {
                 return Err(invalid(format!("stage '{}' appears twice", s.name)));
             }
@@ -331,11 +356,28 @@ impl DeployFile {
             if !names.contains(t) {
                 return Err(invalid(format!("terminal_stage '{t}' is not a stage")));
             }
+            if self.stages.iter().any(|s| &s.name == t && s.host.is_some()) {
+                return Err(invalid(format!(
+                    "terminal_stage '{t}' must run on the host `opengs run` runs on"
+                )));
+            }
         }
         if !(self.startup_timeout_s > 0.0 && self.drain_timeout_s >= 0.0) {
             return Err(invalid("timeouts must be positive".into()));
         }
         Ok(())
+    }
+
+    /// The hosts other than the main one that this file puts stages on.
+    pub fn hosts(&self) -> Vec<&str> {
+        let mut hosts: Vec<&str> = self
+            .stages
+            .iter()
+            .filter_map(|s| s.host.as_deref())
+            .collect();
+        hosts.sort_unstable();
+        hosts.dedup();
+        hosts
     }
 
     pub fn source(&self) -> &StageSpec {

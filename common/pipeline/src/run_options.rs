@@ -31,6 +31,13 @@ pub struct RunOptions {
     /// No end of data: the sensor waits for frames a recorder appends until the run is
     /// stopped (`opengs ctl stop`, SIGTERM).
     pub live: bool,
+    /// Where this supervisor runs: `None` on the main host (`opengs run`: the deploy file's
+    /// stages without a `host`; those with one are shown from their telemetry), a host name
+    /// under `opengs node` (only that host's stages; no source, runs until stopped).
+    pub host: Option<String>,
+    /// The run id all hosts share (bridge stages get it as `--link`); `run_id` on the main
+    /// host, `<link>-<host>` on the others.
+    pub link: String,
 }
 
 /// Flags a run sets on individual stages, each typed by the stage's own argument struct.

@@ -34,6 +34,9 @@ pub struct StageProcess {
     pub spec: StageSpec,
     /// Which of the stage's processes this is (0 for the first; replicas count up).
     pub replica: u32,
+    /// Runs on another host (this supervisor never starts it; it knows it from the telemetry
+    /// a bridge brings): that host's name.
+    pub remote: Option<String>,
     pub state: StageState,
     pub restarts: u32,
     pub processed: u64,
@@ -97,6 +100,7 @@ impl StageProcess {
     pub fn replica(spec: StageSpec, log_dir: &Path, replica: u32) -> Self {
         let log_path = log_dir.join(format!("{}.log", replica_label(&spec.name, replica)));
         Self {
+            remote: None,
             spec,
             replica,
             state: StageState::Starting,
@@ -246,6 +250,22 @@ impl StageProcess {
                 unsafe { libc::kill(child.id() as i32, signal) == 0 }
             }
             None => false,
+        }
+    }
+
+    /// A stage on another host, known from its telemetry.
+    pub fn remote(spec: StageSpec, log_dir: &Path, replica: u32) -> Self {
+        let mut p = Self::replica(spec, log_dir, replica);
+        p.remote = p.spec.host.clone();
+        p
+    }
+
+    /// Telemetry of a remote stage arrived from `pid` (its pid on its own host).
+    pub fn heard_remotely(&mut self, pid: u32) {
+        self.pid = Some(pid);
+        self.last_heard = Instant::now();
+        if self.state == StageState::Starting {
+            self.state = StageState::Ready;
         }
     }
 

@@ -8,6 +8,9 @@ pub struct StageStatus {
     /// Which of the stage's processes (0 for the first; `replicas`, `opengs ctl scale`).
     #[serde(default)]
     pub replica: u32,
+    /// The host it runs on, when not this supervisor's (shown from its telemetry).
+    #[serde(default)]
+    pub host: Option<String>,
     pub pid: Option<u32>,
     pub state: String,
     pub restarts: u32,
@@ -43,10 +46,13 @@ impl PipelineStatus {
         for st in &self.stages {
             // A stage with several processes lists each as the latency profile does: NAME#N.
             let replicated = self.stages.iter().filter(|o| o.name == st.name).count() > 1;
-            let name = match replicated {
+            let mut name = match replicated {
                 true => format!("{}#{}", st.name, st.replica),
                 false => st.name.clone(),
             };
+            if let Some(host) = &st.host {
+                name.push_str(&format!("@{host}"));
+            }
             s.push_str(&format!(
                 "{:<12} {:<12} {:>8} {:<11} {:>8} {:>10} {:>9}\n",
                 name,

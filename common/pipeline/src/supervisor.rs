@@ -183,6 +183,8 @@ impl Supervisor {
 
 struct RunState {
     run_id: String,
+    /// The run id all hosts share (`--link` of bridge stages).
+    link: String,
     out_dir: PathBuf,
     stages: Vec<StageProcess>,
     stage_flags: StageFlags,
@@ -235,11 +237,17 @@ impl RunState {
             .map(|d| d.len());
         Self {
             run_id: opts.run_id.clone(),
+            link: opts.link.clone(),
             out_dir: opts.out_dir.clone(),
             stages: crate::viewer_args::stages_to_start(&opts.deploy, &opts.stage_flags.viewer)
                 .into_iter()
+                // Under `opengs node`, only this host's stages.
+                .filter(|s| opts.host.is_none() || s.host == opts.host)
                 .flat_map(|s| (0..s.replicas).map(move |r| (s.clone(), r)))
-                .map(|(s, r)| StageProcess::replica(s, &log_dir, r))
+                .map(|(s, r)| match (&opts.host, &s.host) {
+                    (None, Some(_)) => StageProcess::remote(s, &log_dir, r),
+                    _ => StageProcess::replica(s, &log_dir, r),
+                })
                 .collect(),
             stage_flags: opts.stage_flags.clone(),
             source_args,
@@ -290,6 +298,9 @@ impl RunState {
         }
         if let Some(kind) = &s.spec.kind {
             a.extend(["--kind".to_string(), kind.clone()]);
+        }
+        if s.spec.link {
+            a.extend(["--link".to_string(), self.link.clone()]);
         }
         // A restarted tracker goes on from the last pose it published.
         if s.spec.name == stage_names::TRACKER && s.restarts > 0 {
@@ -380,6 +391,13 @@ impl RunState {
             .attach_interval(Duration::from_millis(100))
             .map_err(|e| anyhow::anyhow!("{e:?}"))?;
         for i in 0..self.stages.len() {
+            if let Some(host) = &self.stages[i].remote {
+                self.note(&format!(
+                    "{} runs on host {host} (opengs node --host {host}): shown from its telemetry",
+                    self.stages[i].label()
+                ));
+                continue;
+            }
             let args = self.args_for(i);
             let optional = self.stages[i].spec.optional;
             if let Err(e) = self.stages[i].spawn(&args) {
@@ -541,6 +559,9 @@ impl RunState {
             else {
                 continue;
             };
+            if self.stages[i].remote.is_some() {
+                self.stages[i].heard_remotely(h.pid);
+            }
             self.stages[i].heard_from(h.pid);
             if let Some(swap) = self.swap.as_mut().filter(|s| s.index == i) {
                 match event {
@@ -674,6 +695,12 @@ impl RunState {
             ));
         }
         let current = &self.stages[index];
+        if let Some(host) = &current.remote {
+            return Err(format!(
+                "stage '{stage}' runs on host {host}: opengs ctl --run {}-{host} swap {stage} --to {kind}",
+                self.link
+            ));
+        }
         let Some(from) = current.spec.kind.clone() else {
             return Err(format!("stage '{stage}' has no kinds to swap"));
         };
@@ -707,6 +734,15 @@ impl RunState {
             return Err("a swap or scale is in progress; scale once it is over".into());
         }
         let requested = Instant::now();
+        if let Some(host) = self
+            .stage_index(stage)
+            .and_then(|i| self.stages[i].remote.as_ref())
+        {
+            return Err(format!(
+                "stage '{stage}' runs on host {host}: opengs ctl --run {}-{host} scale {stage} --to {to}",
+                self.link
+            ));
+        }
         let plan = crate::scale::plan(&self.stages, stage, to)?;
         let first = self
             .stage_index(stage)
@@ -799,7 +835,10 @@ impl RunState {
                 .map(|s| StageStatus {
                     name: s.spec.name.clone(),
                     replica: s.replica,
-                    pid: s.is_running().then(|| s.pid()).flatten(),
+                    host: s.remote.clone(),
+                    pid: (s.is_running() || s.remote.is_some())
+                        .then(|| s.pid())
+                        .flatten(),
                     state: serde_json::to_value(s.state)
                         .ok()
                         .and_then(|v| v.as_str().map(String::from))
@@ -819,6 +858,10 @@ impl RunState {
     /// restarts, or stopped on bad input.
     fn watch_children(&mut self, ctx: &RunContext) -> anyhow::Result<Option<Ending>> {
         for i in 0..self.stages.len() {
+            // Its own host's `opengs node` restarts it.
+            if self.stages[i].remote.is_some() {
+                continue;
+            }
             if self.stages[i].state == StageState::Retired {
                 if self.stages[i].retire_overdue(crate::swap::RETIRE_GRACE) {
                     self.note(&format!(

@@ -118,6 +118,8 @@ pub fn viewer_stage() -> StageSpec {
         watchdog_s: VIEWER_WATCHDOG_S,
         optional: true,
         replicas: 1,
+        host: None,
+        link: false,
     }
 }
 

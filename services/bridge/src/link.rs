@@ -45,6 +45,11 @@ pub struct LinkArgs {
     /// file). Required to listen beyond loopback.
     #[arg(long)]
     pub credentials: Option<PathBuf>,
+    /// Report ready only once another host subscribes to every exported service, so the run
+    /// starts when the other side is there (on the main host: its first keyframes would
+    /// otherwise go nowhere). The stage's `startup_timeout_s` bounds the wait.
+    #[arg(long)]
+    pub wait_for_peer: bool,
 }
 
 /// The services a bridge can carry (the control services stay on their host).
@@ -77,6 +82,7 @@ pub struct Link {
     /// (user, password) presented when connecting.
     pub login: Option<(String, String)>,
     pub credentials: Option<PathBuf>,
+    pub wait_for_peer: bool,
 }
 
 impl Link {
@@ -163,6 +169,7 @@ impl Link {
             connect: args.connect.clone(),
             login,
             credentials: args.credentials.clone(),
+            wait_for_peer: args.wait_for_peer,
         })
     }
 

@@ -16,14 +16,18 @@ struct Args {
     /// Run directory (unused by the bridge; every stage accepts it).
     #[arg(long)]
     out: Option<PathBuf>,
+    /// The stage's name in the deploy file (its telemetry says it): each host's bridge has
+    /// its own.
+    #[arg(long, default_value = "bridge")]
+    name: String,
     #[command(flatten)]
     link: LinkArgs,
 }
 
 fn main() -> ExitCode {
     let args = Args::parse();
-    stage_main("bridge", &args.run_id, |ctx| {
+    stage_main(&args.name, &args.run_id, |ctx| {
         let link = Link::plan(&args.run_id, &args.link).map_err(anyhow::Error::msg)?;
-        opengs_bridge::zenoh_link::run_bridge(ctx, &link)
+        opengs_bridge::zenoh_link::run_bridge(ctx, &link, &args.name)
     })
 }

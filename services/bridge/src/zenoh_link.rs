@@ -126,8 +126,8 @@ fn import_port(
     with_header!(spec.name, make(ctx, node, spec))
 }
 
-/// Runs the bridge until a termination signal.
-pub fn run_bridge(ctx: &RunContext, link: &Link) -> anyhow::Result<()> {
+/// Runs the bridge (the stage called `name`) until a termination signal.
+pub fn run_bridge(ctx: &RunContext, link: &Link, name: &str) -> anyhow::Result<()> {
     let config = zenoh::Config::from_json5(&link.zenoh_config().to_string())
         .map_err(|e| anyhow::anyhow!("Zenoh configuration: {e}"))?;
     let session = zenoh::open(config)
@@ -165,9 +165,10 @@ pub fn run_bridge(ctx: &RunContext, link: &Link) -> anyhow::Result<()> {
     let stop = Arc::new(AtomicBool::new(false));
     let importer = {
         let (ctx, imports, stop) = (ctx.clone(), link.import.clone(), stop.clone());
-        std::thread::spawn(move || import_loop(&ctx, &imports, taken, &stop))
+        let name = name.to_string();
+        std::thread::spawn(move || import_loop(&ctx, &name, &imports, taken, &stop))
     };
-    let exported = export_loop(ctx, link, &session);
+    let exported = export_loop(ctx, name, link, &session);
     stop.store(true, Ordering::Relaxed);
     drop(subscribers);
     let imported = importer
@@ -180,9 +181,14 @@ pub fn run_bridge(ctx: &RunContext, link: &Link) -> anyhow::Result<()> {
 }
 
 /// Sends every exported message to the link until a termination signal.
-fn export_loop(ctx: &RunContext, link: &Link, session: &zenoh::Session) -> anyhow::Result<()> {
+fn export_loop(
+    ctx: &RunContext,
+    name: &str,
+    link: &Link,
+    session: &zenoh::Session,
+) -> anyhow::Result<()> {
     let node = ctx.node(&format!("bridge_out_{}", std::process::id()))?;
-    let telemetry = TelemetrySink::new(ctx, &node, "bridge")?;
+    let telemetry = TelemetrySink::new(ctx, &node, name)?;
     let ports: Vec<Box<dyn ExportPort>> = link
         .export
         .iter()
@@ -210,19 +216,77 @@ fn export_loop(ctx: &RunContext, link: &Link, session: &zenoh::Session) -> anyho
     let _heartbeat = ws
         .attach_interval(HEARTBEAT)
         .map_err(|e| anyhow::anyhow!("WaitSet: {e:?}"))?;
+    let mut missed: Vec<Missed> = link.export.iter().map(|_| Missed::default()).collect();
+    if link.wait_for_peer {
+        let unheard = |publishers: &[zenoh::pubsub::Publisher]| -> Vec<String> {
+            publishers
+                .iter()
+                .filter(|p| !p.matching_status().wait().is_ok_and(|m| m.matching()))
+                .map(|p| p.key_expr().to_string())
+                .collect()
+        };
+        let mut said = false;
+        loop {
+            let waiting = unheard(&publishers);
+            if waiting.is_empty() {
+                break;
+            }
+            if !std::mem::replace(&mut said, true) {
+                tracing::info!(
+                    "waiting for a host that subscribes to {}",
+                    waiting.join(", ")
+                );
+            }
+            match ws.wait_and_process_once_with_timeout(
+                |_| CallbackProgression::Continue,
+                std::time::Duration::from_millis(50),
+            ) {
+                Ok(WaitSetRunResult::TerminationRequest | WaitSetRunResult::Interrupt) => {
+                    return Ok(())
+                }
+                Err(e) => anyhow::bail!("WaitSet: {e:?}"),
+                Ok(_) => {}
+            }
+            // Local messages meanwhile are not kept: the run has not started.
+            for port in &ports {
+                port.drain(&mut |_, _| {})?;
+            }
+        }
+        tracing::info!("every exported service has a subscriber on another host");
+    }
     telemetry.ready();
     loop {
         match ws.wait_and_process_once(|_| CallbackProgression::Continue) {
-            Ok(WaitSetRunResult::TerminationRequest | WaitSetRunResult::Interrupt) => return Ok(()),
+            Ok(WaitSetRunResult::TerminationRequest | WaitSetRunResult::Interrupt) => {
+                for (m, spec) in missed.iter_mut().zip(&link.export) {
+                    m.observe(spec.name, true, 0);
+                }
+                return Ok(());
+            }
             Err(e) => anyhow::bail!("WaitSet: {e:?}"),
             Ok(_) => {}
         }
         telemetry.alive();
-        for (port, publisher) in ports.iter().zip(&publishers) {
+        for (((port, publisher), spec), missed) in ports
+            .iter()
+            .zip(&publishers)
+            .zip(&link.export)
+            .zip(&mut missed)
+        {
+            // Telemetry about carrying telemetry would be carried too, without end.
+            let report = spec.name != service::TELEMETRY.name;
             port.drain(&mut |stamp, bytes| {
+                if report {
+                    let heard = publisher
+                        .matching_status()
+                        .wait()
+                        .is_ok_and(|m| m.matching());
+                    missed.observe(spec.name, heard, stamp.seq);
+                }
                 let start = now_ns();
                 match publisher.put(bytes).wait() {
-                    Ok(()) => telemetry.processed(stamp, start, now_ns()),
+                    Ok(()) if report => telemetry.processed(stamp, start, now_ns()),
+                    Ok(()) => {}
                     Err(e) => tracing::warn!("{}: {e}", publisher.key_expr()),
                 }
             })?;
@@ -230,15 +294,50 @@ fn export_loop(ctx: &RunContext, link: &Link, session: &zenoh::Session) -> anyho
     }
 }
 
+/// Messages of one exported service sent while no other host subscribed: lost to the other
+/// side (the link was down, or that host not started). Said once when it starts and once,
+/// with the count and seqs, when a host is back.
+#[derive(Default)]
+struct Missed {
+    /// (count, first seq, last seq) of the current stretch.
+    stretch: Option<(u64, u64, u64)>,
+}
+
+impl Missed {
+    fn observe(&mut self, service: &str, heard: bool, seq: u64) {
+        match (&mut self.stretch, heard) {
+            (None, false) => {
+                tracing::warn!(
+                    "{service}: no other host receives it now (link down or not started)"
+                );
+                self.stretch = Some((1, seq, seq));
+            }
+            (Some((n, _, last)), false) => {
+                *n += 1;
+                *last = seq;
+            }
+            (Some((n, first, last)), true) => {
+                tracing::warn!(
+                    "{service}: {n} messages (seq {first} to {last}) went out while no other host \
+                     received them; they are lost to it"
+                );
+                self.stretch = None;
+            }
+            (None, true) => {}
+        }
+    }
+}
+
 /// Publishes here what the link brings, until `stop`.
 fn import_loop(
     ctx: &RunContext,
+    name: &str,
     imports: &[ServiceSpec],
     taken: Receiver<(usize, Vec<u8>)>,
     stop: &AtomicBool,
 ) -> anyhow::Result<()> {
     let node = ctx.node(&format!("bridge_in_{}", std::process::id()))?;
-    let telemetry = TelemetrySink::new(ctx, &node, "bridge")?;
+    let telemetry = TelemetrySink::new(ctx, &node, name)?;
     let ports: Vec<Box<dyn ImportPort>> = imports
         .iter()
         .map(|spec| import_port(ctx, &node, spec))
@@ -248,7 +347,10 @@ fn import_loop(
             Ok((i, bytes)) => {
                 let start = now_ns();
                 match ports[i].publish(&bytes) {
-                    Ok(stamp) => telemetry.processed(&stamp, start, now_ns()),
+                    Ok(stamp) if imports[i].name != service::TELEMETRY.name => {
+                        telemetry.processed(&stamp, start, now_ns())
+                    }
+                    Ok(_) => {}
                     Err(e) => tracing::error!("{} from the link rejected: {e:#}", imports[i].name),
                 }
             }

@@ -23,8 +23,11 @@ enum Command {
     Run(cmd::run::RunArgs),
     /// Run the four consensus ablation settings on one dataset and print the table.
     Ablation(cmd::ablation::AblationArgs),
-    /// Talk to a running pipeline: status, stop.
+    /// Talk to a running pipeline: status, stop, swap, scale.
     Ctl(cmd::ctl::CtlArgs),
+    /// Run the stages a deploy file puts on this host (`host = "NAME"`) for a run whose
+    /// main host runs `opengs run`; a bridge stage on each side carries their messages.
+    Node(cmd::node::NodeArgs),
     /// Remove the shared memory and registry entries of runs whose supervisor died.
     Clean(cmd::clean::CleanArgs),
     /// Recompute a finished run's metrics (ATE) from its files.
@@ -57,6 +60,7 @@ fn main() -> ExitCode {
         Command::Run(a) => cmd::run::run(a),
         Command::Ablation(a) => cmd::ablation::run(a),
         Command::Ctl(a) => cmd::ctl::run(a),
+        Command::Node(a) => cmd::node::run(a),
         Command::Clean(a) => cmd::clean::run(a),
         Command::Eval(a) => cmd::eval::run(a),
         Command::Profile(a) => cmd::profile::run(a),

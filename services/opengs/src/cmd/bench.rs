@@ -24,6 +24,10 @@ enum BenchWhat {
     /// Segmenter replicas with a segmenter held to a fixed time per keyframe: keyframes
     /// segmented with 1, 2, 4 replicas, mIoU, and `ctl scale` during a run (the gap it leaves).
     Replicas(super::bench_replicas::BenchReplicasArgs),
+    /// What a Zenoh link between hosts adds to one-way latency (640×480 RGB-D frame, label
+    /// map), against iceoryx2 alone, in one run (needs `opengs-bridge`: feature
+    /// opengs-bridge/zenoh).
+    Bridge(super::bench_bridge::BenchBridgeArgs),
     /// G-ICP registration time and tracker throughput.
     Gicp(super::bench_gicp::BenchGicpArgs),
     /// The tracker alone over a dataset, one frame at a time: per-frame time percentiles,
@@ -71,6 +75,7 @@ pub fn run(args: BenchArgs) -> anyhow::Result<()> {
         BenchWhat::Slam(a) => super::bench_slam::run(a),
         BenchWhat::Faults(a) => super::bench_faults::run(a),
         BenchWhat::Replicas(a) => super::bench_replicas::run(a),
+        BenchWhat::Bridge(a) => super::bench_bridge::run(a),
         BenchWhat::Map(a) => super::bench_map::run(a),
         BenchWhat::Consensus { runs } => {
             opengs_semantics::bench::print_consensus_bench(runs);

@@ -1,5 +1,6 @@
 pub mod ablation;
 pub mod bench;
+pub mod bench_bridge;
 pub mod bench_faults;
 pub mod bench_gicp;
 pub mod bench_ipc;
@@ -13,6 +14,7 @@ pub mod ctl;
 pub mod eval;
 pub mod map_input;
 pub mod models;
+pub mod node;
 pub mod objects;
 pub mod profile;
 pub mod refine;

@@ -195,6 +195,14 @@ pub fn execute(args: &RunArgs) -> anyhow::Result<RunSummary> {
         deploy.description,
         out_dir.display()
     );
+    let run_id_for_link = run_id.clone();
+    for host in deploy.hosts() {
+        eprintln!(
+            "stages on host {host}: start them there with `opengs node --deploy {} --host {host} \
+             --run-id {run_id}`",
+            args.deploy.display()
+        );
+    }
     opengs_pipeline::run(RunOptions {
         deploy,
         dataset: args.dataset.clone(),
@@ -206,6 +214,8 @@ pub fn execute(args: &RunArgs) -> anyhow::Result<RunSummary> {
         quality_every: args.quality_every,
         finish_after_data: finish_after_data && !args.live,
         live: args.live,
+        host: None,
+        link: run_id_for_link,
     })
 }
 
