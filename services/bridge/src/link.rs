@@ -50,6 +50,22 @@ pub struct LinkArgs {
     /// otherwise go nowhere). The stage's `startup_timeout_s` bounds the wait.
     #[arg(long)]
     pub wait_for_peer: bool,
+    /// TLS (for `tls/HOST:PORT` endpoints: the link encrypted): the certificate of the
+    /// authority that signed the other side's certificate.
+    #[arg(long)]
+    pub tls_ca: Option<PathBuf>,
+    /// TLS: this bridge's certificate (PEM), signed by an authority the other side trusts;
+    /// required to listen on a tls/ endpoint.
+    #[arg(long, requires = "tls_key")]
+    pub tls_cert: Option<PathBuf>,
+    /// TLS: the private key of --tls-cert (PEM).
+    #[arg(long, requires = "tls_cert")]
+    pub tls_key: Option<PathBuf>,
+    /// TLS: both sides show a certificate signed by an authority the other trusts (mutual
+    /// TLS; give it to the bridges at both ends, each with --tls-cert and --tls-key); enough,
+    /// without --credentials, to listen beyond loopback.
+    #[arg(long, requires = "tls_cert")]
+    pub tls_mutual: bool,
 }
 
 /// The services a bridge can carry (the control services stay on their host).
@@ -83,6 +99,16 @@ pub struct Link {
     pub login: Option<(String, String)>,
     pub credentials: Option<PathBuf>,
     pub wait_for_peer: bool,
+    pub tls: Option<Tls>,
+}
+
+/// The TLS side of a link (files checked to exist).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Tls {
+    pub ca: PathBuf,
+    /// This side's certificate and key.
+    pub identity: Option<(PathBuf, PathBuf)>,
+    pub mutual: bool,
 }
 
 impl Link {
@@ -131,11 +157,12 @@ impl Link {
         for e in listen.iter().chain(&args.connect) {
             check_endpoint(e)?;
         }
+        let tls = Self::plan_tls(args, &listen)?;
         if let Some(open) = listen.iter().find(|e| !is_loopback(e)) {
-            if args.credentials.is_none() {
+            if args.credentials.is_none() && !args.tls_mutual {
                 return Err(format!(
                     "--listen {open} is reachable from other machines: give --credentials \
-                     FILE (user:password lines) to say who may connect"
+                     FILE (user:password lines) or --tls-mutual to say who may connect"
                 ));
             }
         }
@@ -170,7 +197,40 @@ impl Link {
             login,
             credentials: args.credentials.clone(),
             wait_for_peer: args.wait_for_peer,
+            tls,
         })
+    }
+
+    /// The TLS files, checked against the endpoints that need them.
+    fn plan_tls(args: &LinkArgs, listen: &[String]) -> Result<Option<Tls>, String> {
+        let is_tls = |e: &String| e.starts_with("tls/");
+        let uses_tls = listen.iter().chain(&args.connect).any(is_tls);
+        let given = args.tls_ca.is_some() || args.tls_cert.is_some() || args.tls_mutual;
+        if !uses_tls {
+            return match given {
+                true => Err("--tls-*: no tls/ endpoint to use them on".into()),
+                false => Ok(None),
+            };
+        }
+        let ca = args
+            .tls_ca
+            .clone()
+            .ok_or("a tls/ endpoint needs --tls-ca FILE (who signed the other side)")?;
+        let identity = args.tls_cert.clone().zip(args.tls_key.clone());
+        if listen.iter().any(is_tls) && identity.is_none() {
+            return Err("listening on a tls/ endpoint needs --tls-cert and --tls-key".into());
+        }
+        let files = std::iter::once(&ca).chain(identity.iter().flat_map(|(c, k)| [c, k]));
+        for f in files {
+            if !f.is_file() {
+                return Err(format!("{}: no such file", f.display()));
+            }
+        }
+        Ok(Some(Tls {
+            ca,
+            identity,
+            mutual: args.tls_mutual,
+        }))
     }
 
     /// The Zenoh key of `service` on this link.
@@ -204,7 +264,21 @@ impl Link {
             usrpwd.insert("dictionary_file".into(), file.display().to_string().into());
         }
         if !usrpwd.is_empty() {
-            config["transport"] = serde_json::json!({ "auth": { "usrpwd": usrpwd } });
+            config["transport"]["auth"] = serde_json::json!({ "usrpwd": usrpwd });
+        }
+        if let Some(tls) = &self.tls {
+            let path = |p: &PathBuf| serde_json::Value::from(p.display().to_string());
+            let mut t = serde_json::json!({
+                "root_ca_certificate": path(&tls.ca),
+                "enable_mtls": tls.mutual,
+            });
+            if let Some((cert, key)) = &tls.identity {
+                for side in ["listen", "connect"] {
+                    t[format!("{side}_certificate")] = path(cert);
+                    t[format!("{side}_private_key")] = path(key);
+                }
+            }
+            config["transport"]["link"] = serde_json::json!({ "tls": t });
         }
         config
     }
@@ -304,6 +378,40 @@ mod tests {
         assert_eq!(c["transport"]["auth"]["usrpwd"]["password"], "s3cret");
         std::fs::write(&pw, "\n").unwrap();
         assert!(Link::plan("r", &a).unwrap_err().contains("empty"));
+    }
+
+    #[test]
+    fn tls_needs_its_files_and_goes_into_the_session() {
+        let dir = tempfile::tempdir().unwrap();
+        let file = |n: &str| {
+            let p = dir.path().join(n);
+            std::fs::write(&p, "PEM").unwrap();
+            p
+        };
+        let (ca, cert, key) = (file("ca.pem"), file("a.pem"), file("a.key"));
+        let mut a = args(&["segments"], &[]);
+        a.listen = vec!["tls/0.0.0.0:7447".into()];
+        let refused = |a: &LinkArgs| Link::plan("r", a).unwrap_err();
+        assert!(refused(&a).contains("needs --tls-ca"));
+        a.tls_ca = Some(ca.clone());
+        assert!(refused(&a).contains("needs --tls-cert and --tls-key"));
+        a.tls_cert = Some(cert.clone());
+        a.tls_key = Some(dir.path().join("missing.key"));
+        assert!(refused(&a).contains("missing.key: no such file"));
+        a.tls_key = Some(key.clone());
+        // Beyond loopback: client certificates (or credentials) say who may connect.
+        assert!(refused(&a).contains("reachable from other machines"));
+        a.tls_mutual = true;
+        let c = Link::plan("r", &a).unwrap().zenoh_config();
+        let tls = &c["transport"]["link"]["tls"];
+        assert_eq!(tls["root_ca_certificate"], ca.display().to_string());
+        assert_eq!(tls["listen_certificate"], cert.display().to_string());
+        assert_eq!(tls["connect_private_key"], key.display().to_string());
+        assert_eq!(tls["enable_mtls"], true);
+        // TLS options with no tls/ endpoint are a mistake, not ignored.
+        let mut plain = args(&["segments"], &[]);
+        plain.tls_ca = Some(ca);
+        assert!(refused(&plain).contains("no tls/ endpoint"));
     }
 
     #[test]

@@ -39,6 +39,14 @@ fn bridge(run_id: &str, args: &[&str], log: &Path) -> Bridge {
     )
 }
 
+/// A port free now (the kernel's choice), for a bridge to listen on.
+fn free_port() -> u16 {
+    std::net::TcpListener::bind("127.0.0.1:0")
+        .and_then(|l| l.local_addr())
+        .expect("a free port")
+        .port()
+}
+
 fn send_segments(out: &Outlet<SegmentsHeader>, seq: u64) {
     let labels = [SegmentLabel::new(3, 0.9, Some("chair"), 0.7)];
     let map = vec![3u32; 8 * 6];
@@ -95,6 +103,30 @@ fn drain<H: std::fmt::Debug + opengs_runtime::iceoryx2::prelude::ZeroCopySend + 
     out
 }
 
+/// Subscribes each of `sessions` to the run's segmentations; the channel gets one `()` per
+/// segmentation any of them receives (keep the subscribers).
+fn listen_to_segments(
+    sessions: &[&zenoh::Session],
+) -> (
+    std::sync::mpsc::Receiver<()>,
+    Vec<zenoh::pubsub::Subscriber<()>>,
+) {
+    let (tx, rx) = std::sync::mpsc::channel();
+    let subs = sessions
+        .iter()
+        .map(|s| {
+            let tx = tx.clone();
+            s.declare_subscriber("opengs/shared-run/segments")
+                .callback(move |_| {
+                    let _ = tx.send(());
+                })
+                .wait()
+                .expect("subscriber")
+        })
+        .collect();
+    (rx, subs)
+}
+
 /// A Zenoh participant of its own, connecting to `endpoint` with `login` (or none).
 fn intruder(endpoint: &str, login: Option<(&str, &str)>) -> zenoh::Session {
     let mut config = serde_json::json!({
@@ -119,12 +151,7 @@ fn only_credentialed_hosts_exchange_messages_and_the_link_survives_a_restart() {
     std::fs::write(&creds, "hostb:right-password\n").expect("creds");
     let pw = dir.path().join("pw");
     std::fs::write(&pw, "right-password\n").expect("pw");
-    // A port free now (the kernel's choice), for A to listen on.
-    let port = std::net::TcpListener::bind("127.0.0.1:0")
-        .and_then(|l| l.local_addr())
-        .expect("a free port")
-        .port();
-    let endpoint = format!("tcp/127.0.0.1:{port}");
+    let endpoint = format!("tcp/127.0.0.1:{}", free_port());
     let (run_a, run_b) = (
         format!("ta{}", std::process::id()),
         format!("tb{}", std::process::id()),
@@ -198,19 +225,7 @@ fn only_credentialed_hosts_exchange_messages_and_the_link_survives_a_restart() {
     // Wrong password, no password: they cannot subscribe to the run's segmentations ...
     let wrong = intruder(&endpoint, Some(("hostb", "guess")));
     let none = intruder(&endpoint, None);
-    let (tx, rx) = std::sync::mpsc::channel();
-    let mut subs = Vec::new();
-    for s in [&wrong, &none] {
-        let tx = tx.clone();
-        subs.push(
-            s.declare_subscriber("opengs/shared-run/segments")
-                .callback(move |_| {
-                    let _ = tx.send(());
-                })
-                .wait()
-                .expect("subscriber"),
-        );
-    }
+    let (rx, _subs) = listen_to_segments(&[&wrong, &none]);
     // ... nor put renders into it, valid ones included.
     let mut render = Vec::new();
     {
@@ -286,4 +301,200 @@ fn only_credentialed_hosts_exchange_messages_and_the_link_survives_a_restart() {
         3,
     );
     assert!(got.len() >= 3, "segments after B's restart: {got:?}");
+}
+
+/// `openssl` makes a CA and certificates signed by it (for localhost / 127.0.0.1); `None`
+/// when there is no `openssl` on this machine.
+fn certificates(dir: &Path, ca: &str, names: &[&str]) -> Option<()> {
+    let openssl = |args: &[&str]| {
+        Command::new("openssl")
+            .args(args)
+            .current_dir(dir)
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .status()
+            .ok()
+            .filter(|s| s.success())
+    };
+    let ec = [
+        "-newkey",
+        "ec",
+        "-pkeyopt",
+        "ec_paramgen_curve:prime256v1",
+        "-nodes",
+    ];
+    let (ca_pem, ca_key) = (format!("{ca}.pem"), format!("{ca}.key"));
+    openssl(
+        &[
+            &["req", "-x509"][..],
+            &ec,
+            &["-keyout", &ca_key, "-out", &ca_pem, "-days", "2"],
+            &[
+                "-subj",
+                "/CN=opengs test CA",
+                "-addext",
+                "basicConstraints=critical,CA:TRUE",
+                "-addext",
+                "keyUsage=critical,keyCertSign",
+            ],
+        ]
+        .concat(),
+    )?;
+    let ext = dir.join("leaf.ext");
+    std::fs::write(
+        &ext,
+        "basicConstraints=CA:FALSE\nkeyUsage=digitalSignature\n\
+         extendedKeyUsage=serverAuth,clientAuth\nsubjectAltName=DNS:localhost,IP:127.0.0.1\n",
+    )
+    .ok()?;
+    for name in names {
+        let (key, csr, pem) = (
+            format!("{name}.key"),
+            format!("{name}.csr"),
+            format!("{name}.pem"),
+        );
+        openssl(
+            &[
+                &["req"][..],
+                &ec,
+                &["-keyout", &key, "-out", &csr, "-subj", "/CN=localhost"],
+            ]
+            .concat(),
+        )?;
+        openssl(&[
+            "x509",
+            "-req",
+            "-in",
+            &csr,
+            "-CA",
+            &ca_pem,
+            "-CAkey",
+            &ca_key,
+            "-CAcreateserial",
+            "-out",
+            &pem,
+            "-days",
+            "2",
+            "-extfile",
+            ext.to_str()?,
+        ])?;
+    }
+    Some(())
+}
+
+/// A participant connecting over TLS, trusting `ca`, showing `identity` (cert, key) if any.
+fn tls_intruder(endpoint: &str, ca: &Path, identity: Option<(&Path, &Path)>) -> zenoh::Session {
+    let mut tls = serde_json::json!({ "root_ca_certificate": ca.display().to_string() });
+    if let Some((cert, key)) = identity {
+        tls["enable_mtls"] = true.into();
+        tls["connect_certificate"] = cert.display().to_string().into();
+        tls["connect_private_key"] = key.display().to_string().into();
+    }
+    let config = serde_json::json!({
+        "mode": "peer",
+        "connect": { "endpoints": [endpoint] },
+        "scouting": { "multicast": { "enabled": false }, "gossip": { "enabled": false } },
+        "transport": { "link": { "tls": tls } },
+    });
+    let config = zenoh::Config::from_json5(&config.to_string()).expect("config");
+    zenoh::open(config)
+        .wait()
+        .expect("a session opens, connected or not")
+}
+
+#[test]
+fn over_tls_only_hosts_with_a_certificate_of_the_run_get_in() {
+    let dir = tempfile::tempdir().expect("tmp");
+    if certificates(dir.path(), "ca", &["a", "b"]).is_none()
+        || certificates(dir.path(), "other_ca", &["stranger"]).is_none()
+    {
+        eprintln!("skipped: no openssl to make test certificates");
+        return;
+    }
+    let f = |n: &str| dir.path().join(n);
+    let s = |n: &str| f(n).display().to_string();
+    let port = free_port();
+    let endpoint = format!("tls/127.0.0.1:{port}");
+    let (run_a, run_b) = (
+        format!("la{}", std::process::id()),
+        format!("lb{}", std::process::id()),
+    );
+    let _a = bridge(
+        &run_a,
+        &[
+            "--export",
+            "segments",
+            "--listen",
+            &endpoint,
+            "--tls-ca",
+            &s("ca.pem"),
+            "--tls-cert",
+            &s("a.pem"),
+            "--tls-key",
+            &s("a.key"),
+            "--tls-mutual",
+        ],
+        &f("a.log"),
+    );
+    let _b = bridge(
+        &run_b,
+        &[
+            "--import",
+            "segments",
+            "--connect",
+            &endpoint,
+            "--tls-ca",
+            &s("ca.pem"),
+            "--tls-cert",
+            &s("b.pem"),
+            "--tls-key",
+            &s("b.key"),
+            "--tls-mutual",
+        ],
+        &f("b.log"),
+    );
+    let ctx_a = RunContext::new(&run_a).expect("ctx a");
+    let ctx_b = RunContext::new(&run_b).expect("ctx b");
+    let node_a = ctx_a.node("test_a").expect("node a");
+    let node_b = ctx_b.node("test_b").expect("node b");
+    let seg_out = Outlet::<SegmentsHeader>::new(&ctx_a, &node_a, &SEGMENTS, 4096).expect("out");
+    let seg_in = Inlet::<SegmentsHeader>::new(&ctx_b, &node_b, &SEGMENTS).expect("in");
+    let seg_seq = |h: &SegmentsHeader| h.stamp.seq;
+    let got = carried(
+        |q| send_segments(&seg_out, q),
+        || drain(&seg_in, seg_seq),
+        Duration::from_secs(20),
+        5,
+    );
+    let logs = || ["a.log", "b.log"].map(|n| std::fs::read_to_string(f(n)).unwrap_or_default());
+    assert!(
+        got.len() >= 5,
+        "segments over TLS: {got:?}; logs {:?}",
+        logs()
+    );
+
+    // Plain TCP to the TLS port, a certificate from another authority, no certificate at all.
+    let plain = intruder(&format!("tcp/127.0.0.1:{port}"), None);
+    let stranger = tls_intruder(
+        &endpoint,
+        &f("ca.pem"),
+        Some((&f("stranger.pem"), &f("stranger.key"))),
+    );
+    let anonymous = tls_intruder(&endpoint, &f("ca.pem"), None);
+    let (rx, _subs) = listen_to_segments(&[&plain, &stranger, &anonymous]);
+    let started = Instant::now();
+    let mut seq = 1000;
+    while started.elapsed() < Duration::from_secs(3) {
+        send_segments(&seg_out, seq);
+        seq += 1;
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    assert!(
+        rx.try_recv().is_err(),
+        "a participant without a certificate of the run got in"
+    );
+    assert!(
+        !drain(&seg_in, seg_seq).is_empty(),
+        "b, with its certificate, still receives"
+    );
 }
