@@ -229,12 +229,23 @@ struct SegmentsQueue {
     /// Seqs rendered already: service history (a restarted segmenter or mapper) and a swap's
     /// two processes can hand the same segmentation over twice.
     rendered: VecDeque<u64>,
+    /// A restarted mapper: what waits at the first render is the service's history, mostly
+    /// answered before the restart (the consensus skips those, and each would hold the next
+    /// render for its 5 s timeout), so only the newest of it is rendered.
+    history: bool,
 }
 
 /// Segmentations waiting for a render (a keyframe a second at most, on a slow segmenter).
 const MAX_WAITING_SEGMENTS: usize = 8;
 
 impl SegmentsQueue {
+    fn after_restart() -> Self {
+        Self {
+            history: true,
+            ..Self::default()
+        }
+    }
+
     fn push(&mut self, h: SegmentsHeader) {
         let seq = h.stamp.seq;
         if self.rendered.contains(&seq) {
@@ -254,6 +265,14 @@ impl SegmentsQueue {
 
     fn take_newest(&mut self) -> Option<SegmentsHeader> {
         let (seq, h) = self.waiting.pop_last()?;
+        if std::mem::take(&mut self.history) && !self.waiting.is_empty() {
+            tracing::info!(
+                "restarted: segmentations {:?} (service history, before the restart) dropped; \
+                 #{seq}, the newest, rendered",
+                self.waiting.keys().collect::<Vec<_>>()
+            );
+            self.waiting.clear();
+        }
         self.rendered.push_back(seq);
         if self.rendered.len() > 64 {
             self.rendered.pop_front();
@@ -589,7 +608,10 @@ pub fn run_mapper(ctx: &RunContext, out_dir: &Path, args: &MapperArgs) -> anyhow
         mapper,
         map_target: Outlet::new(ctx, &node, &MAP_TARGET, 1 << 20)?,
         renders: Outlet::new(ctx, &node, &RENDERS, 640 * 480 * 4 + (1 << 16))?,
-        waiting_segments: SegmentsQueue::default(),
+        waiting_segments: match resumed.restarts {
+            0 => SegmentsQueue::default(),
+            _ => SegmentsQueue::after_restart(),
+        },
         outstanding: None,
         cameras: VecDeque::new(),
         top_k: args.top_k.max(1),
@@ -851,6 +873,22 @@ mod tests {
         let rest: Vec<u64> = std::iter::from_fn(|| q.take_newest().map(|h| h.stamp.seq)).collect();
         assert_eq!((first, rest), (Some(12), vec![11, 10]));
         assert!(q.is_empty());
+    }
+
+    #[test]
+    fn a_restarted_mapper_renders_only_the_newest_of_the_history() {
+        let mut q = SegmentsQueue::after_restart();
+        for seq in [40, 50, 60, 70] {
+            q.push(segments(seq));
+        }
+        assert_eq!(q.take_newest().map(|h| h.stamp.seq), Some(70));
+        assert!(q.is_empty(), "40, 50, 60 dropped");
+        // From then on, out of order as usual.
+        for seq in [90, 80] {
+            q.push(segments(seq));
+        }
+        let rest: Vec<u64> = std::iter::from_fn(|| q.take_newest().map(|h| h.stamp.seq)).collect();
+        assert_eq!(rest, [90, 80]);
     }
 
     #[test]
