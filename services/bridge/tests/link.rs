@@ -13,7 +13,8 @@ use opengs_ipc_schema::{
     now_ns, to_wire, LabelCompleteness, MessageKind, RenderHeader, SegmentLabel, SegmentsHeader,
     Stamp,
 };
-use opengs_runtime::{Inlet, Outlet, RunContext};
+use opengs_runtime::iceoryx2::prelude::Node;
+use opengs_runtime::{Inlet, Ipc, Outlet, RunContext};
 use zenoh::Wait;
 
 struct Bridge(Child);
@@ -37,6 +38,35 @@ fn bridge(run_id: &str, args: &[&str], log: &Path) -> Bridge {
             .spawn()
             .expect("bridge starts"),
     )
+}
+
+/// This test's own ends of the two hosts' services: a node in each iceoryx2 domain.
+struct Hosts {
+    ctx_a: RunContext,
+    ctx_b: RunContext,
+    node_a: Node<Ipc>,
+    node_b: Node<Ipc>,
+}
+
+impl Hosts {
+    fn new(run_a: &str, run_b: &str) -> Self {
+        let ctx_a = RunContext::new(run_a).expect("ctx a");
+        let ctx_b = RunContext::new(run_b).expect("ctx b");
+        Self {
+            node_a: ctx_a.node("test_a").expect("node a"),
+            node_b: ctx_b.node("test_b").expect("node b"),
+            ctx_a,
+            ctx_b,
+        }
+    }
+
+    /// A publisher of segmentations on A and a subscriber on B.
+    fn segments_a_to_b(&self) -> (Outlet<SegmentsHeader>, Inlet<SegmentsHeader>) {
+        (
+            Outlet::new(&self.ctx_a, &self.node_a, &SEGMENTS, 4096).expect("out"),
+            Inlet::new(&self.ctx_b, &self.node_b, &SEGMENTS).expect("in"),
+        )
+    }
 }
 
 /// A port free now (the kernel's choice), for a bridge to listen on.
@@ -187,14 +217,11 @@ fn only_credentialed_hosts_exchange_messages_and_the_link_survives_a_restart() {
         &dir.path().join("a.log"),
     );
 
-    let ctx_a = RunContext::new(&run_a).expect("ctx a");
-    let ctx_b = RunContext::new(&run_b).expect("ctx b");
-    let node_a = ctx_a.node("test_a").expect("node a");
-    let node_b = ctx_b.node("test_b").expect("node b");
-    let seg_out = Outlet::<SegmentsHeader>::new(&ctx_a, &node_a, &SEGMENTS, 4096).expect("out");
-    let seg_in = Inlet::<SegmentsHeader>::new(&ctx_b, &node_b, &SEGMENTS).expect("in");
-    let ren_out = Outlet::<RenderHeader>::new(&ctx_b, &node_b, &RENDERS, 4096).expect("out");
-    let ren_in = Inlet::<RenderHeader>::new(&ctx_a, &node_a, &RENDERS).expect("in");
+    let hosts = Hosts::new(&run_a, &run_b);
+    let (seg_out, seg_in) = hosts.segments_a_to_b();
+    let ren_out =
+        Outlet::<RenderHeader>::new(&hosts.ctx_b, &hosts.node_b, &RENDERS, 4096).expect("out");
+    let ren_in = Inlet::<RenderHeader>::new(&hosts.ctx_a, &hosts.node_a, &RENDERS).expect("in");
     let seg_seq = |h: &SegmentsHeader| h.stamp.seq;
     let ren_seq = |h: &RenderHeader| h.stamp.seq;
 
@@ -453,12 +480,8 @@ fn over_tls_only_hosts_with_a_certificate_of_the_run_get_in() {
         ],
         &f("b.log"),
     );
-    let ctx_a = RunContext::new(&run_a).expect("ctx a");
-    let ctx_b = RunContext::new(&run_b).expect("ctx b");
-    let node_a = ctx_a.node("test_a").expect("node a");
-    let node_b = ctx_b.node("test_b").expect("node b");
-    let seg_out = Outlet::<SegmentsHeader>::new(&ctx_a, &node_a, &SEGMENTS, 4096).expect("out");
-    let seg_in = Inlet::<SegmentsHeader>::new(&ctx_b, &node_b, &SEGMENTS).expect("in");
+    let hosts = Hosts::new(&run_a, &run_b);
+    let (seg_out, seg_in) = hosts.segments_a_to_b();
     let seg_seq = |h: &SegmentsHeader| h.stamp.seq;
     let got = carried(
         |q| send_segments(&seg_out, q),
