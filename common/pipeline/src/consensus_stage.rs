@@ -33,13 +33,20 @@ pub enum Ablation {
     NoConfidenceUpdate,
     /// No part label decay (§5.1).
     NoPartDecay,
+    /// No Inside relation (§5; not in the paper): absorbed objects stay in the larger label.
+    NoInsideSplit,
+    /// Unmapped pixels count in a = I/|ℓs| (§5; the paper's table): a segment half over
+    /// unmapped space is "other".
+    NoUnmappedAbstain,
 }
 
 impl Ablation {
-    pub const ALL: [Ablation; 3] = [
+    pub const ALL: [Ablation; 5] = [
         Self::NoCounterPruning,
         Self::NoConfidenceUpdate,
         Self::NoPartDecay,
+        Self::NoInsideSplit,
+        Self::NoUnmappedAbstain,
     ];
 
     pub fn as_str(&self) -> &'static str {
@@ -47,6 +54,8 @@ impl Ablation {
             Self::NoCounterPruning => "no-counter-pruning",
             Self::NoConfidenceUpdate => "no-confidence-update",
             Self::NoPartDecay => "no-part-decay",
+            Self::NoInsideSplit => "no-inside-split",
+            Self::NoUnmappedAbstain => "no-unmapped-abstain",
         }
     }
 
@@ -55,6 +64,8 @@ impl Ablation {
             Self::NoCounterPruning => config.enable_counter_pruning = false,
             Self::NoConfidenceUpdate => config.enable_confidence_update = false,
             Self::NoPartDecay => config.enable_part_decay = false,
+            Self::NoInsideSplit => config.enable_inside_split = false,
+            Self::NoUnmappedAbstain => config.unmapped_pixels_abstain = false,
         }
     }
 }

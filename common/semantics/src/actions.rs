@@ -94,17 +94,43 @@ impl Decisions {
         split_from
     }
 
-    /// Fresh labels for winning Partial parts and New segments, in increasing ℓs order.
+    /// Fresh labels for winning Partial parts, Inside and New segments, in increasing ℓs order.
     fn allocate_fresh(
         e: &Evidence,
         table: &mut GlobalLabelTable,
         split_from: &BTreeMap<u32, u32>,
         d: &mut Decisions,
     ) {
-        let mut order: Vec<u32> = split_from.keys().chain(&e.matching.new).copied().collect();
+        let mut order: Vec<u32> = split_from
+            .keys()
+            .chain(e.matching.inside.keys())
+            .chain(&e.matching.new)
+            .copied()
+            .collect();
         order.sort_unstable();
         for s in order {
             let allocated = table.allocate(None, 0.0, conf(e.conf_s, s));
+            if let Some(&r) = e.matching.inside.get(&s) {
+                // ℓr keeps its confidence: its Full partner just confirmed it without ℓs.
+                let target = match allocated {
+                    Ok(t) => {
+                        d.input_regions.insert(s, d.relabels.len());
+                        d.relabels.push(RelabelInstruction {
+                            from: r,
+                            to: t,
+                            pixels: Vec::new(),
+                        });
+                        t
+                    }
+                    Err(_) => {
+                        d.refused += 1;
+                        r
+                    }
+                };
+                d.targets
+                    .insert(s, (Relation::Inside, LabelTarget::Label(target)));
+                continue;
+            }
             match (split_from.get(&s), allocated) {
                 (Some(&r), Ok(t)) => {
                     d.targets

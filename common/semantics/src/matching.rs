@@ -1,4 +1,5 @@
-//! Resolves each input label to exactly one relation (Full > Partial > Whole > New > other).
+//! Resolves each input label to exactly one relation (Full > Inside > Partial > Whole > New >
+//! other).
 
 use std::collections::{BTreeMap, BTreeSet};
 
@@ -11,6 +12,8 @@ use crate::relation::{pair_relation, PairRelation};
 pub struct Matching {
     /// ℓs → ℓr of Full matches (one-to-one).
     pub full: BTreeMap<u32, u32>,
+    /// ℓs → ℓr: ℓs lies inside (a ≥ τ2) a rendered label that another input label Full-matches.
+    pub inside: BTreeMap<u32, u32>,
     /// ℓr → its Partial parts ℓs (sorted).
     pub partial: BTreeMap<u32, Vec<u32>>,
     /// ℓs → its rendered Whole parts ℓr (sorted).
@@ -25,42 +28,82 @@ impl Matching {
     /// Classifies every non-zero input label of `overlap`.
     pub fn resolve(overlap: &Overlap, config: &ConsensusConfig) -> Self {
         let mut m = Matching::default();
-        let inputs: Vec<u32> = overlap
+        let mut inputs: Vec<u32> = overlap
             .input_area
             .keys()
             .copied()
             .filter(|&s| s != 0)
             .collect();
-        // Non-zero rendered partners of ℓs with (ℓr, I, relation), ℓr increasing.
+        let area = |s: u32| overlap.input_area.get(&s).copied().unwrap_or(0);
+        // The pixels of ℓs where the map renders a label (all of them unless unmapped pixels
+        // abstain).
+        let mapped_area = |s: u32| {
+            if config.unmapped_pixels_abstain {
+                area(s) - overlap.pairs.get(&(s, 0)).copied().unwrap_or(0)
+            } else {
+                area(s)
+            }
+        };
+        // Non-zero rendered partners of ℓs: (ℓr, I, a, a over mapped pixels, the §5 relation
+        // of (a, b)), ℓr increasing.
         let partners = |s: u32| {
+            let n = f64::from(mapped_area(s));
             overlap
                 .pairs
                 .range((s, 1)..=(s, u32::MAX))
                 .map(move |(&(_, r), &i)| {
                     let (a, b) = overlap.ratios(s, r);
-                    (r, i, a, pair_relation(a, b, config))
+                    let a_mapped = if n > 0.0 { f64::from(i) / n } else { 0.0 };
+                    let full = pair_relation(a_mapped, b, config) == Some(PairRelation::Full);
+                    (r, i, a, a_mapped, full, pair_relation(a, b, config))
                 })
+        };
+        // Mostly over unmapped space: New, whatever the few mapped pixels render.
+        let unmapped = |s: u32| {
+            config.unmapped_pixels_abstain
+                && f64::from(mapped_area(s)) < config.tau_min * f64::from(area(s))
         };
         // Largest I wins, then smallest ℓr: only matters when thresholds ≤ 0.5 allow ties.
         let best =
             |cands: Vec<(u32, u32)>| cands.into_iter().max_by_key(|&(r, i)| (i, u32::MAX - r));
 
         let mut full_r = BTreeSet::new();
+        for &s in inputs.iter().filter(|&&s| unmapped(s)) {
+            m.new.push(s);
+        }
+        inputs.retain(|&s| !unmapped(s));
         for &s in &inputs {
+            // Full over the mapped pixels: the unmapped rest of ℓs extends the same object.
             let cands = partners(s)
-                .filter(|&(r, _, _, rel)| rel == Some(PairRelation::Full) && !full_r.contains(&r))
-                .map(|(r, i, _, _)| (r, i))
+                .filter(|&(r, _, _, _, full, _)| full && !full_r.contains(&r))
+                .map(|(r, i, ..)| (r, i))
                 .collect();
             if let Some((r, _)) = best(cands) {
                 m.full.insert(s, r);
                 full_r.insert(r);
             }
         }
+        if config.enable_inside_split {
+            for &s in inputs.iter().filter(|s| !m.full.contains_key(s)) {
+                let cands = partners(s)
+                    .filter(|&(r, _, _, a, _, _)| a >= config.tau_part && full_r.contains(&r))
+                    .map(|(r, i, ..)| (r, i))
+                    .collect();
+                if let Some((r, _)) = best(cands) {
+                    m.inside.insert(s, r);
+                }
+            }
+        }
         let mut in_partial = BTreeSet::new();
-        for &s in inputs.iter().filter(|s| !m.full.contains_key(s)) {
+        for &s in inputs
+            .iter()
+            .filter(|s| !m.full.contains_key(s) && !m.inside.contains_key(s))
+        {
+            // Partial and Whole keep the paper's a: over a big surface's unmapped pixels a
+            // Partial would hand its confident pieces fresh labels and split the surface.
             let cands = partners(s)
-                .filter(|&(_, _, _, rel)| rel == Some(PairRelation::Partial))
-                .map(|(r, i, _, _)| (r, i))
+                .filter(|&(.., rel)| rel == Some(PairRelation::Partial))
+                .map(|(r, i, ..)| (r, i))
                 .collect();
             if let Some((r, _)) = best(cands) {
                 m.partial.entry(r).or_default().push(s);
@@ -71,17 +114,17 @@ impl Matching {
         // (possible only at exact threshold boundaries); each part belongs to one input label.
         let mut claimed: BTreeSet<u32> = full_r.iter().chain(m.partial.keys()).copied().collect();
         for &s in &inputs {
-            if m.full.contains_key(&s) || in_partial.contains(&s) {
+            if m.full.contains_key(&s) || m.inside.contains_key(&s) || in_partial.contains(&s) {
                 continue;
             }
             let parts: Vec<u32> = partners(s)
-                .filter(|&(r, _, _, rel)| rel == Some(PairRelation::Whole) && !claimed.contains(&r))
-                .map(|(r, _, _, _)| r)
+                .filter(|&(r, .., rel)| rel == Some(PairRelation::Whole) && !claimed.contains(&r))
+                .map(|(r, ..)| r)
                 .collect();
             if !parts.is_empty() {
                 claimed.extend(parts.iter().copied());
                 m.whole.insert(s, parts);
-            } else if partners(s).all(|(_, _, a, _)| a < config.tau_min) {
+            } else if partners(s).all(|(_, _, a, ..)| a < config.tau_min) {
                 m.new.push(s);
             } else {
                 m.other.push(s);

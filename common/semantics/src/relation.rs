@@ -19,6 +19,9 @@ pub enum PairRelation {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 pub enum Relation {
     Full,
+    /// a ≥ τ2 inside a rendered label that another input label Full-matches: a separate object
+    /// the map absorbed into that label (departure from the paper, docs/METHOD.md §5).
+    Inside,
     Partial,
     Whole,
     /// a < τ3 for every non-zero ℓr: the segment covers unmapped space.

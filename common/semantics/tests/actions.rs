@@ -201,10 +201,11 @@ fn decay_never_goes_below_zero() {
 }
 
 #[test]
-fn partial_part_splits_off_a_fully_matched_label() {
+fn a_part_inside_a_fully_matched_label_splits_off() {
     // Rendered 1 rows 0..20; input 5 rows 0..18 (Full: a = 1, b = 0.9); input 6 rows 18..20
-    // (Partial: a = 1, b = 0.1) with C_s 0.9 > C_r 0.5 → fresh label 2, relabel 1 → 2 there.
-    // The Full match's prune region is rows 18..20 (rendered 1 outside input 5).
+    // (a = 1, b = 0.1) lies inside label 1, which input 5 Full-matches: Inside → fresh label 2,
+    // relabel 1 → 2 there. The Full match's prune region is rows 18..20 (rendered 1 outside
+    // input 5).
     let mut scene = Scene::new(20, 20);
     scene.rendered_rows(0..20, 1);
     scene.input_rows(0..18, 5, 0.6).input_rows(18..20, 6, 0.9);
@@ -222,8 +223,8 @@ fn partial_part_splits_off_a_fully_matched_label() {
     );
     assert_eq!(out.counter_pruning.len(), 1);
     assert_eq!(out.counter_pruning[0].pixels, scene.rows(18..20));
-    // Full raised C_r to 0.6, then label 1 lost a part: 0.6 − 0.06.
-    assert_relative_eq!(conf(&consensus, 1), 0.54, epsilon = 1e-6);
+    // Full raised C_r to 0.6; label 1 is whole (its Full partner says so), so no decay.
+    assert_relative_eq!(conf(&consensus, 1), 0.6, epsilon = 1e-6);
 }
 
 #[test]
@@ -243,4 +244,121 @@ fn whole_merge_ties_go_to_smallest_part_id() {
             pixels: scene.rows(0..5)
         }]
     );
+}
+
+/// Rendered 1 covers the grid (a table that absorbed a ball); input 10 is the table (rows
+/// 0..19: a = 1, b = 0.95, Full), input 11 the ball (the 20 px of row 19: a = 1, b = 0.05).
+fn absorbed_scene() -> Scene {
+    let mut scene = Scene::new(20, 20);
+    scene.rendered_rows(0..20, 1);
+    scene.input_rows(0..19, 10, 0.9).input_rows(19..20, 11, 0.5);
+    scene
+}
+
+#[test]
+fn inside_a_full_matched_label_splits_off_whatever_the_confidences() {
+    // The ball's C_s = 0.5 is far below C_r = 0.95, yet the table's Full match says label 1
+    // is the table without the ball: the ball gets fresh label 2 and its Gaussians move there.
+    let scene = absorbed_scene();
+    let mut consensus = consensus_with(&[0.95], config());
+    let out = scene.run(&mut consensus);
+    assert_eq!(out.target_of(10), Some(&LabelTarget::Label(1)));
+    assert_eq!(out.target_of(11), Some(&LabelTarget::Label(2)));
+    let ball = out.assignments.iter().find(|a| a.input_label == 11);
+    assert_eq!(ball.map(|a| a.relation), Some(Relation::Inside));
+    assert_eq!(
+        out.relabels,
+        vec![RelabelInstruction {
+            from: 1,
+            to: 2,
+            pixels: scene.rows(19..20)
+        }]
+    );
+    assert_eq!(&out.consistent_label_map[..380], &[1; 380][..]);
+    assert_eq!(&out.consistent_label_map[380..], &[2; 20][..]);
+    assert_relative_eq!(conf(&consensus, 1), 0.95); // no decay: the table is whole
+    assert_relative_eq!(conf(&consensus, 2), 0.5);
+    assert_eq!(consensus.table().get(1).map(|l| l.part_decays), Some(0));
+}
+
+#[test]
+fn without_the_inside_relation_an_absorbed_object_stays_absorbed() {
+    // The paper's table: b = 0.05 < τ3 is no relation, so the ball's pixels go to background.
+    let scene = absorbed_scene();
+    let config = ConsensusConfig {
+        enable_inside_split: false,
+        ..config()
+    };
+    let mut consensus = consensus_with(&[0.95], config);
+    let out = scene.run(&mut consensus);
+    assert_eq!(out.target_of(11), Some(&LabelTarget::Background));
+    assert!(out.relabels.is_empty());
+    assert_eq!(consensus.table().len(), 1);
+}
+
+#[test]
+fn inside_needs_the_full_partner_a_map_label_split_into_parts_stays_partial() {
+    // The table is seen as two halves (b = 0.5 and 0.4) and the ball as rows 18..20 (b = 0.1):
+    // no Full match, so all three are Partial parts and the confident map keeps them on 1.
+    let mut scene = Scene::new(20, 20);
+    scene.rendered_rows(0..20, 1);
+    scene
+        .input_rows(0..10, 10, 0.9)
+        .input_rows(10..18, 12, 0.9)
+        .input_rows(18..20, 11, 0.5);
+    let mut consensus = consensus_with(&[0.95], config());
+    let out = scene.run(&mut consensus);
+    for label in [10, 11, 12] {
+        assert_eq!(out.target_of(label), Some(&LabelTarget::Label(1)));
+    }
+    assert!(out.relabels.is_empty());
+}
+
+/// A picture (input 11, rows 0..10) whose Gaussians are mostly unlabelled: its old label 5
+/// renders on rows 0..2 inside it and on 6 pixels of row 10 outside; label 0 on the rest.
+/// a = 40/200 = 0.2 over all its pixels, 40/40 = 1 over the mapped ones; b = 40/46 = 0.87.
+fn half_unmapped_scene() -> Scene {
+    let mut scene = Scene::new(20, 20);
+    scene.input_rows(0..10, 11, 0.8);
+    scene.rendered_rows(0..2, 5).rendered_span(200..206, 5);
+    scene
+}
+
+#[test]
+fn unmapped_pixels_abstain_so_a_half_labelled_object_keeps_its_label() {
+    // Full over the mapped pixels: every pixel of the picture paints 5, so its unlabelled
+    // Gaussians get 5.
+    let scene = half_unmapped_scene();
+    let mut consensus = consensus_with(&[0.5, 0.5, 0.5, 0.5, 0.9], config());
+    let out = scene.run(&mut consensus);
+    assert_eq!(out.assignments[0].relation, Relation::Full);
+    assert_eq!(out.target_of(11), Some(&LabelTarget::Label(5)));
+    assert_eq!(&out.consistent_label_map[..200], &[5; 200][..]);
+}
+
+#[test]
+fn with_unmapped_pixels_counted_the_object_falls_to_background_for_good() {
+    // The paper's table: a = 0.2 with b = 0.87 is no relation, so "other": its unlabelled
+    // Gaussians stay unlabelled, and next time it looks the same.
+    let scene = half_unmapped_scene();
+    let config = ConsensusConfig {
+        unmapped_pixels_abstain: false,
+        ..config()
+    };
+    let mut consensus = consensus_with(&[0.5, 0.5, 0.5, 0.5, 0.9], config);
+    let out = scene.run(&mut consensus);
+    assert_eq!(out.assignments[0].relation, Relation::Other);
+    assert!(out.consistent_label_map[..200].iter().all(|&l| l == 0));
+}
+
+#[test]
+fn a_segment_mostly_over_unmapped_space_is_new() {
+    // 10 of its 200 pixels render label 1 (5 % < τ3): New, whatever those few render.
+    let mut scene = Scene::new(20, 20);
+    scene.input_rows(0..10, 11, 0.8);
+    scene.rendered_span(0..10, 1).rendered_rows(10..20, 1);
+    let mut consensus = consensus_with(&[0.9], config());
+    let out = scene.run(&mut consensus);
+    assert_eq!(out.assignments[0].relation, Relation::New);
+    assert_eq!(out.target_of(11), Some(&LabelTarget::Label(2)));
 }

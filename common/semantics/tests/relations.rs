@@ -15,21 +15,26 @@ struct Case {
     expected: Relation,
 }
 
-fn run_case(case: &Case) -> Relation {
+fn run_case(case: &Case, config: &ConsensusConfig) -> Relation {
     let width = 100;
     let total = case.s_only + case.shared + case.r_only;
     let mut scene = Scene::new(width, total.div_ceil(width) + 1);
     scene.input_span(0..case.s_only + case.shared, 1, 0.5);
     scene.rendered_span(case.s_only..total, 1);
-    let mut consensus = consensus_with(&[0.5], ConsensusConfig::default());
+    let mut consensus = consensus_with(&[0.5], config.clone());
     let out = scene.run(&mut consensus);
     assert_eq!(out.assignments.len(), 1, "{}", case.name);
     out.assignments[0].relation
 }
 
+/// The paper's table: input-only pixels (rendered 0) count in a = I/|ℓs|.
 #[test]
 fn relation_boundaries_on_both_sides() {
     use Relation::*;
+    let paper = ConsensusConfig {
+        unmapped_pixels_abstain: false,
+        ..ConsensusConfig::default()
+    };
     #[rustfmt::skip]
     let cases = [
         // a = b = 340/400 = 0.85 exactly.
@@ -58,7 +63,37 @@ fn relation_boundaries_on_both_sides() {
         Case { name: "new: no overlap", s_only: 400, shared: 0, r_only: 100, expected: New },
     ];
     for case in &cases {
-        assert_eq!(run_case(case), case.expected, "{}", case.name);
+        assert_eq!(run_case(case, &paper), case.expected, "{}", case.name);
+    }
+}
+
+/// The default: input-only pixels render 0, so they abstain from the a of Full and Inside;
+/// under τ3 of a segment mapped is New.
+#[test]
+fn unmapped_pixels_abstain_boundaries() {
+    use Relation::*;
+    #[rustfmt::skip]
+    let cases = [
+        // Mapped: 339 of 400 pixels, all rendering the label: a = 1, b = 1.
+        Case { name: "a = 0.8475 of all pixels", s_only: 61, shared: 339, r_only: 0, expected: Full },
+        // Mapped share 40/400 = τ3: matched (a = 1, b = 1); 39/400 below: New.
+        Case { name: "mapped share = τ3", s_only: 360, shared: 40, r_only: 0, expected: Full },
+        Case { name: "mapped share below τ3", s_only: 361, shared: 39, r_only: 0, expected: New },
+        // Only Full (and Inside) read the mapped a: with b = 340/401 < τ1 this stays other.
+        Case { name: "a = τ1, b below τ1", s_only: 60, shared: 340, r_only: 61, expected: Other },
+        // Partial keeps the paper's a = 360/400 = τ2 …
+        Case { name: "partial: a = τ2", s_only: 40, shared: 360, r_only: 200, expected: Partial },
+        // … and a = 359/400 is not Partial even though all mapped pixels render the label.
+        Case { name: "a just below τ2", s_only: 41, shared: 359, r_only: 200, expected: Other },
+        Case { name: "new: no overlap", s_only: 400, shared: 0, r_only: 100, expected: New },
+    ];
+    for case in &cases {
+        assert_eq!(
+            run_case(case, &ConsensusConfig::default()),
+            case.expected,
+            "{}",
+            case.name
+        );
     }
 }
 

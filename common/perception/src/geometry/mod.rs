@@ -95,6 +95,9 @@ pub struct GeometryParams {
     /// not touch are one surface seen around an occluder; 0 turns the join off.
     pub coplanar_min_share: f32,
     pub coplanar_angle: f32,
+    /// Pixel share of a segment's patches that must lie on its plane (normal within
+    /// `coplanar_angle`, offset within `offset_scale` per metre) for it to count as planar.
+    pub coplanar_inliers: f32,
     /// Seeds the per-frame shuffle of label ids.
     pub seed: u64,
 }
@@ -116,6 +119,7 @@ impl Default for GeometryParams {
             min_pixels: 40,
             coplanar_min_share: 0.05,
             coplanar_angle: 0.1,
+            coplanar_inliers: 0.9,
             seed: 0x6e0_5e9,
         }
     }
@@ -150,7 +154,8 @@ impl GeometrySegmenter {
             && params.colour_cut.is_finite()
             && [params.coplanar_min_share, params.coplanar_angle]
                 .into_iter()
-                .all(|x| x.is_finite() && x >= 0.0);
+                .all(|x| x.is_finite() && x >= 0.0)
+            && (0.0..=1.0).contains(&params.coplanar_inliers);
         if !valid {
             return Err(PerceptionError::InvalidInput(format!(
                 "geometry segmenter parameters out of range: {params:?}"
@@ -231,6 +236,7 @@ impl GeometrySegmenter {
             min_share: p.coplanar_min_share,
             max_angle: p.coplanar_angle,
             offset_scale: p.offset_scale,
+            min_inliers: p.coplanar_inliers,
         }
         .join(&patches.stats, &self.edges, &segment_of_patch, count);
         let confidence =
