@@ -33,9 +33,9 @@ pub enum Ablation {
     NoConfidenceUpdate,
     /// No part label decay (§5.1).
     NoPartDecay,
-    /// No Inside relation (§5; not in the paper): absorbed objects stay in the larger label.
+    /// No Inside relation (§5.5; not in the paper): absorbed objects stay in the larger label.
     NoInsideSplit,
-    /// Unmapped pixels count in a = I/|ℓs| (§5; the paper's table): a segment half over
+    /// Unmapped pixels count in a = I/|ℓs| (§5.5; the paper's table): a segment half over
     /// unmapped space is "other".
     NoUnmappedAbstain,
 }

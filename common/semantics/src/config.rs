@@ -27,10 +27,10 @@ pub struct ConsensusConfig {
     pub enable_confidence_update: bool,
     /// Ablation switch: part label decay (§5.1).
     pub enable_part_decay: bool,
-    /// Switch of the Inside relation (a departure from the paper, §5): off, an object absorbed
+    /// Switch of the Inside relation (a departure from the paper, §5.5): off, an object absorbed
     /// into a larger map label stays there.
     pub enable_inside_split: bool,
-    /// A departure from the paper (§5): for Full and Inside, a = I/|ℓs| counts only the pixels
+    /// A departure from the paper (§5.5): for Full and Inside, a = I/|ℓs| counts only the pixels
     /// of ℓs where the map renders a label, and a segment with under τ3 of its pixels mapped
     /// is New. Off, an object half over unmapped space is "other" and its unlabelled
     /// Gaussians never get a label.

@@ -163,12 +163,12 @@ impl CoplanarRules {
         // Groups of `large` segments, joined pairwise; a join never puts two touching
         // segments in one group, not even through a third (a picture on its wall and a piece
         // of that wall behind a bookshelf).
-        let mut group: Vec<Vec<usize>> = large.iter().map(|&s| vec![s]).collect();
+        // Groups of indices into `large`.
+        let mut group: Vec<Vec<usize>> = (0..large.len()).map(|k| vec![k]).collect();
         let mut group_of: Vec<usize> = (0..large.len()).collect();
         for i in 0..large.len() {
             for j in i + 1..large.len() {
-                let (a, b) = (large[i], large[j]);
-                let (pa, pb) = (&planes[a], &planes[b]);
+                let (pa, pb) = (&planes[large[i]], &planes[large[j]]);
                 let (ga, gb) = (group_of[i], group_of[j]);
                 if ga == gb || dot(pa.normal, pb.normal) < min_cos {
                     continue;
@@ -176,18 +176,15 @@ impl CoplanarRules {
                 let gap = sub(pb.centroid, pa.centroid);
                 let coplanar = dot(pa.normal, gap).abs() <= self.tolerance(pa)
                     && dot(pb.normal, gap).abs() <= self.tolerance(pb);
-                if !coplanar
-                    || group[ga]
-                        .iter()
-                        .any(|&x| group[gb].iter().any(|&y| touch(x, y)))
-                {
+                let touches = group[ga]
+                    .iter()
+                    .any(|&x| group[gb].iter().any(|&y| touch(large[x], large[y])));
+                if !coplanar || touches {
                     continue;
                 }
                 let moved = std::mem::take(&mut group[gb]);
-                for &s in &moved {
-                    if let Some(k) = large.iter().position(|&l| l == s) {
-                        group_of[k] = ga;
-                    }
+                for &k in &moved {
+                    group_of[k] = ga;
                 }
                 group[ga].extend(moved);
             }
@@ -196,7 +193,7 @@ impl CoplanarRules {
         sets.reset(count, 0.0);
         for members in &group {
             for pair in members.windows(2) {
-                sets.union(pair[0] as u32, pair[1] as u32);
+                sets.union(large[pair[0]] as u32, large[pair[1]] as u32);
             }
         }
         let (new_of_segment, joined) = compact_components(&mut sets, count);
