@@ -22,6 +22,9 @@ pub struct TrackerConfig {
     /// takes the wide search too (fr2_desk, scene 1: 90 % land within 7 mm clean and 14 mm
     /// with noise; a slide into the neighbouring minimum moved 4 cm).
     pub fast_path_offset: f64,
+    /// The wide registration from the prediction that lands this close (m) to the fine
+    /// one's verified answer confirms it: the wide start from the last pose is skipped.
+    pub agreement: f64,
     /// A wide search's answer is polished by fine restarts this far (m) along each camera
     /// axis (0: none).
     pub restart_step: f64,
@@ -32,6 +35,9 @@ pub struct TrackerConfig {
     /// voxel of this side (m; 0: every point); only their winner is refined with every point.
     /// They are exploratory, and nine of them at full size cost a gap frame 200+ ms.
     pub wide_source_voxel: f64,
+    /// The polishing restarts register a source thinned further, to one point per voxel of
+    /// this side (m): they only choose a basin, and the winner is refined with every point.
+    pub restart_source_voxel: f64,
     /// What a registration must satisfy to be trusted.
     pub verify: VerifyConfig,
     pub relocalise: RelocaliseConfig,
@@ -64,7 +70,9 @@ impl TrackerConfig {
             wide_iterations: 30,
             polish_iterations: 10,
             wide_source_voxel: 0.03,
+            restart_source_voxel: 0.06,
             fast_path_offset: 0.025,
+            agreement: 0.01,
             verify: VerifyConfig::default(),
             relocalise: RelocaliseConfig::default(),
             keyframe_overlap: 0.81,

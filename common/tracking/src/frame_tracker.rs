@@ -168,6 +168,9 @@ pub struct FrameTracker {
 enum Attempt {
     /// The fine registration from the prediction (most frames).
     Fast,
+    /// The same after a gap, where the wide search runs anyway: one of its candidates,
+    /// capped like them.
+    FastAfterGap,
     /// Coarse-to-fine, after a gap or a failed fast attempt.
     Wide,
     /// A fine restart near a wide search's answer.
@@ -382,6 +385,7 @@ impl FrameTracker {
         let (schedule, iterations) = match kind {
             Attempt::Fast => (CoarseToFine::fine_only(), c.registration.max_iterations),
             Attempt::Wide => (c.coarse_to_fine.clone(), c.wide_iterations),
+            Attempt::FastAfterGap => (CoarseToFine::fine_only(), c.wide_iterations),
             Attempt::Polish => (CoarseToFine::fine_only(), c.polish_iterations),
             Attempt::Relocalise => (CoarseToFine::fine_only(), c.relocalise.fine_iterations),
         };
@@ -433,11 +437,19 @@ impl FrameTracker {
             predicted,
             seconds: timestamp - t_last,
         };
-        let mut tries = vec![(predicted, Attempt::Fast), (predicted, Attempt::Wide)];
+        let fast = if gap {
+            Attempt::FastAfterGap
+        } else {
+            Attempt::Fast
+        };
+        let mut tries = vec![(predicted, fast), (predicted, Attempt::Wide)];
         if predicted != last {
             tries.push((last, Attempt::Wide));
         }
         let mut best: Option<Registration> = None;
+        // Whether `best` was registered with every point (the fine attempt's answer).
+        let mut best_is_full = false;
+        let mut fine_answer: Option<Pose> = None;
         let mut attempt: Verified = Err("no registration tried".into());
         let mut wide: Option<String> = None;
         // Made when the wide search starts (most frames never need it).
@@ -460,15 +472,31 @@ impl FrameTracker {
                     },
                 });
             }
-            let source = match kind {
-                Attempt::Fast => &cloud,
-                _ => {
+            let full = matches!(kind, Attempt::Fast | Attempt::FastAfterGap);
+            let source = match full {
+                true => &cloud,
+                false => {
                     thin.get_or_insert_with(|| cloud.voxel_subsample(self.config.wide_source_voxel))
                 }
             };
+            let mut agreed = false;
             match self.register_verified(frame, source, &start, kind, Some(&prior)) {
-                Ok(r) if best.as_ref().is_none_or(|b| r.fitness > b.fitness) => best = Some(r),
-                Ok(_) => {}
+                Ok(r) => {
+                    // The fine and the wide registration from the prediction agree: a third
+                    // start would only confirm them (the polish below still looks around).
+                    agreed = !full
+                        && fine_answer.is_some_and(|f| {
+                            (f.inverse() * r.transform).translation.vector.norm()
+                                <= self.config.agreement
+                        });
+                    if full {
+                        fine_answer = Some(r.transform);
+                    }
+                    if best.as_ref().is_none_or(|b| r.fitness > b.fitness) {
+                        best = Some(r);
+                        best_is_full = full;
+                    }
+                }
                 Err(why) => attempt = Err(why),
             }
             // Between consecutive frames, a verified fine registration that lands near the
@@ -480,23 +508,28 @@ impl FrameTracker {
                     .norm()
                     <= self.config.fast_path_offset
             };
-            if k == 0 && !gap && best.as_ref().is_some_and(near) {
+            if agreed || (k == 0 && !gap && best.as_ref().is_some_and(near)) {
                 break;
             }
         }
-        if let (Some(r), Some(thin)) = (&best, &thin) {
-            let polished = self.polish(frame, thin, r.clone(), &prior);
-            // The winner, refined with every point (its verified thin answer if that fails).
-            best = Some(
-                self.register_verified(
-                    frame,
-                    &cloud,
-                    &polished.transform,
-                    Attempt::Polish,
-                    Some(&prior),
-                )
-                .unwrap_or(polished),
-            );
+        if let (Some(found), Some(_)) = (&best, &thin) {
+            let restarts = cloud.voxel_subsample(self.config.restart_source_voxel);
+            // A restart that beats the answer is refined with every point (its verified
+            // thinned answer if that fails); so is a wide answer that none beats.
+            let winner = self.polish(frame, &restarts, found, &prior);
+            if winner.is_some() || !best_is_full {
+                let from = winner.unwrap_or_else(|| found.clone());
+                best = Some(
+                    self.register_verified(
+                        frame,
+                        &cloud,
+                        &from.transform,
+                        Attempt::Polish,
+                        Some(&prior),
+                    )
+                    .unwrap_or(from),
+                );
+            }
         }
         if let Some(r) = best {
             attempt = Ok(r);
@@ -559,22 +592,27 @@ impl FrameTracker {
     }
 
     /// Restarts of the fine registration a step away from a wide search's answer along
-    /// each camera axis; the verified result with the best fitness wins. Wide searches on
-    /// boxy scenes end in minima a few centimetres off (fr2_desk, scene 1, after its 1.8 s
-    /// gap: 3.6 cm off at fitness 0.975; two of six restarts reach the truth at 0.993).
+    /// each camera axis, and one from the answer itself, all with the same `cloud` so that
+    /// their fitness compares; the verified restart with the best fitness, if it is not the
+    /// answer's own. Wide searches on boxy scenes end in minima a few centimetres off
+    /// (fr2_desk, scene 1, after its 1.8 s gap: 3.6 cm off at fitness 0.975; two of six
+    /// restarts reach the truth at 0.993).
     fn polish(
         &self,
         frame: &DepthFrame,
         cloud: &Cloud,
-        found: Registration,
+        found: &Registration,
         prior: &MotionPrior,
-    ) -> Registration {
+    ) -> Option<Registration> {
         let step = self.config.restart_step;
         if step <= 0.0 {
-            return found;
+            return None;
         }
-        let mut best = found;
-        let base = best.transform;
+        let base = found.transform;
+        let own = self
+            .register_verified(frame, cloud, &base, Attempt::Polish, Some(prior))
+            .map_or(f64::NEG_INFINITY, |r| r.fitness);
+        let mut best: Option<Registration> = None;
         for axis in 0..3 {
             for sign in [1.0, -1.0] {
                 let mut t = opengs_geometry::nalgebra::Vector3::zeros();
@@ -583,8 +621,9 @@ impl FrameTracker {
                 if let Ok(r) =
                     self.register_verified(frame, cloud, &start, Attempt::Polish, Some(prior))
                 {
-                    if r.fitness > best.fitness {
-                        best = r;
+                    let to_beat = best.as_ref().map_or(own, |b| b.fitness);
+                    if r.fitness > to_beat {
+                        best = Some(r);
                     }
                 }
             }
