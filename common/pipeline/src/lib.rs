@@ -11,6 +11,7 @@ pub mod keyframe_claims;
 pub mod keyframe_journal;
 pub mod logging;
 pub mod mapper_stage;
+pub mod pacing;
 pub mod progress;
 pub mod recorder;
 pub mod run;

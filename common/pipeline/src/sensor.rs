@@ -1,15 +1,16 @@
 //! The sensor stage: stream a dataset's frames into shared memory, paced.
 
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 use opengs_datasets::{open_dataset, RgbdFrame};
 use opengs_geometry::{pose_to_tum, Intrinsics};
 use opengs_ipc_schema::service::FRAMES;
 use opengs_ipc_schema::{now_ns, FrameHeader, FrameParts, MessageKind, Stamp};
 use opengs_runtime::{
-    waitset, CallbackProgression, Outlet, RunContext, TelemetrySink, WaitSetRunResult,
+    waitset, CallbackProgression, Outlet, RunContext, TelemetrySink, WaitSet, WaitSetRunResult,
 };
 
+use crate::pacing::{Pacer, ANNOUNCED_GAP, LONGEST_GAP};
 use crate::DatasetArgs;
 
 /// Options of the sensor stage.
@@ -17,7 +18,9 @@ use crate::DatasetArgs;
 pub struct SensorArgs {
     #[command(flatten)]
     pub dataset: DatasetArgs,
-    /// Publish at most this many frames per second (default: the dataset's rate; 0 = as fast as possible).
+    /// Publish at most this many frames per second (default: as recorded, each frame its
+    /// timestamp's step after the previous one, so dropped frames keep their gap; 0 = as
+    /// fast as possible).
     #[arg(long)]
     pub max_rate: Option<f64>,
     /// First frame to publish (a restarted sensor resumes where it stopped).
@@ -32,12 +35,22 @@ pub struct SensorArgs {
 /// How often a live sensor with nothing to publish looks for appended frames.
 const LIVE_POLL: Duration = Duration::from_millis(200);
 
-/// What one attempt to publish did.
-enum Step {
-    Published,
-    /// Live, at the end of what was recorded so far.
-    Waiting,
-    EndOfData,
+/// Sleeps in the WaitSet until `due`; whether a termination signal came first.
+fn wait_until(ws: &WaitSet, due: Instant) -> anyhow::Result<bool> {
+    loop {
+        let pause = due.saturating_duration_since(Instant::now());
+        // Returns after the pause, or at once with a pending SIGINT/SIGTERM.
+        match ws.wait_and_process_once_with_timeout(|_| CallbackProgression::Continue, pause) {
+            Ok(WaitSetRunResult::TerminationRequest | WaitSetRunResult::Interrupt) => {
+                return Ok(true)
+            }
+            Ok(_) => {}
+            Err(e) => return Err(anyhow::anyhow!("WaitSet: {e:?}")),
+        }
+        if Instant::now() >= due {
+            return Ok(false);
+        }
+    }
 }
 
 /// Writes one frame into a loaned sample and sends it; returns its stamp.
@@ -85,106 +98,82 @@ pub fn run_sensor(ctx: &RunContext, args: &SensorArgs) -> anyhow::Result<()> {
     let frame_bytes = k.pixel_count() * 7 + 64;
     let frames = Outlet::<FrameHeader>::new(ctx, &node, &FRAMES, frame_bytes)?;
     let telemetry = TelemetrySink::new(ctx, &node, "sensor")?;
-    let rate = match args.max_rate {
-        Some(r) if r <= 0.0 => None,
-        Some(r) => Some(r.min(source.frame_rate())),
-        None => Some(source.frame_rate()),
-    };
+    let mut pacer = Pacer::new(source.frame_rate(), args.max_rate);
     let ws = waitset()?;
-    // Paced: wake on an interval. Unpaced: a long interval only lets the WaitSet see signals.
-    let period = rate.map_or(Duration::from_secs(3600), |r| {
-        Duration::from_secs_f64(1.0 / r)
-    });
+    // Frames are waited for with timeouts; a long interval only lets the WaitSet see signals.
     let _tick = ws
-        .attach_interval(period)
+        .attach_interval(Duration::from_secs(3600))
         .map_err(|e| anyhow::anyhow!("WaitSet interval: {e:?}"))?;
     tracing::info!(
-        "{}: {total} frames{}, {k:?}, rate {rate:?}",
+        "{}: {total} frames{}, {k:?}, {}",
         source.name(),
-        if args.live { " so far (live)" } else { "" }
+        if args.live { " so far (live)" } else { "" },
+        match args.max_rate {
+            Some(r) if r <= 0.0 => "as fast as possible".to_string(),
+            Some(r) => format!("as recorded, at most {r} frames/s"),
+            None => format!("as recorded ({:.1} frames/s nominal)", source.frame_rate()),
+        }
     );
     telemetry.ready();
 
     let mut index = args.start_frame;
     let mut last = Stamp::new(MessageKind::Frame, 0, 0, 0);
-    let mut failure: Option<anyhow::Error> = None;
-    let mut last_poll: Option<std::time::Instant> = None;
-    let mut publish_next = |last: &mut Stamp| -> Result<Step, anyhow::Error> {
+    let mut last_poll: Option<Instant> = None;
+    let signalled = loop {
         if index >= source.len() {
             if !args.live {
-                return Ok(Step::EndOfData);
+                break false;
             }
             telemetry.alive();
-            if last_poll.is_some_and(|t| t.elapsed() < LIVE_POLL) {
-                return Ok(Step::Waiting);
+            if last_poll.is_none_or(|t| t.elapsed() >= LIVE_POLL) {
+                last_poll = Some(Instant::now());
+                let added = source
+                    .refresh()
+                    .map_err(|e| crate::stage_main::BadInput(format!("{}: {e}", source.name())))?;
+                if added > 0 {
+                    tracing::info!("sensor: {added} new frames recorded");
+                }
             }
-            last_poll = Some(std::time::Instant::now());
-            let added = source
-                .refresh()
-                .map_err(|e| crate::stage_main::BadInput(format!("{}: {e}", source.name())))?;
-            if added == 0 || index >= source.len() {
-                return Ok(Step::Waiting);
+            if index >= source.len() {
+                // While waiting for a recorder, sleep in the WaitSet rather than spin.
+                if wait_until(&ws, Instant::now() + LIVE_POLL / 4)? {
+                    break true;
+                }
+                continue;
             }
-            tracing::info!("sensor: {added} new frames recorded");
         }
-        let start = now_ns();
         let frame = source
             .frame(index)
             .map_err(|e| crate::stage_main::BadInput(format!("frame {index}: {e}")))?;
+        if let Some(gap) = pacer
+            .recorded_step(frame.timestamp)
+            .filter(|gap| *gap >= ANNOUNCED_GAP)
+        {
+            tracing::info!(
+                "sensor: the recording has a {:.1} s gap before frame {index}{}",
+                gap.as_secs_f64(),
+                match gap >= LONGEST_GAP {
+                    true => format!(" (replayed as {} s)", LONGEST_GAP.as_secs()),
+                    false => String::new(),
+                }
+            );
+        }
+        if wait_until(&ws, pacer.due(frame.timestamp, Instant::now()))? {
+            break true;
+        }
+        let start = now_ns();
         let stamp = publish_frame(&frames, &frame, &k)?;
         let mut input = stamp;
         input.sent_ns = start;
         telemetry.processed(&input, start, now_ns());
-        *last = stamp;
+        last = stamp;
         index += 1;
-        Ok(match args.live || index < source.len() {
-            true => Step::Published,
-            false => Step::EndOfData,
-        })
     };
-    let result = if rate.is_some() {
-        ws.wait_and_process(|_| match publish_next(&mut last) {
-            Ok(Step::Published | Step::Waiting) => CallbackProgression::Continue,
-            Ok(Step::EndOfData) => CallbackProgression::Stop,
-            Err(e) => {
-                failure = Some(e);
-                CallbackProgression::Stop
-            }
-        })
+    if signalled {
+        tracing::info!("sensor: stopped by signal after frame {}", last.seq);
     } else {
-        loop {
-            // While waiting for a recorder, sleep in the WaitSet rather than spin.
-            let mut pause = Duration::ZERO;
-            match publish_next(&mut last) {
-                Ok(Step::Published) => {}
-                Ok(Step::Waiting) => pause = LIVE_POLL / 4,
-                Ok(Step::EndOfData) => break Ok(WaitSetRunResult::StopRequest),
-                Err(e) => {
-                    failure = Some(e);
-                    break Ok(WaitSetRunResult::StopRequest);
-                }
-            }
-            // Returns at once (or after the pause), reporting a pending SIGINT/SIGTERM.
-            match ws.wait_and_process_once_with_timeout(|_| CallbackProgression::Continue, pause) {
-                Ok(WaitSetRunResult::TerminationRequest) | Ok(WaitSetRunResult::Interrupt) => {
-                    break Ok(WaitSetRunResult::TerminationRequest)
-                }
-                Ok(_) => {}
-                Err(e) => break Err(e),
-            }
-        }
-    };
-    if let Some(e) = failure {
-        return Err(e);
-    }
-    match result.map_err(|e| anyhow::anyhow!("WaitSet: {e:?}"))? {
-        WaitSetRunResult::TerminationRequest | WaitSetRunResult::Interrupt => {
-            tracing::info!("sensor: stopped by signal after frame {}", last.seq);
-        }
-        _ => {
-            tracing::info!("sensor: end of data after {index} frames");
-            telemetry.finished(&last);
-        }
+        tracing::info!("sensor: end of data after {index} frames");
+        telemetry.finished(&last);
     }
     Ok(())
 }

@@ -22,9 +22,6 @@ pub struct TrackerConfig {
     /// takes the wide search too (fr2_desk, scene 1: 90 % land within 7 mm clean and 14 mm
     /// with noise; a slide into the neighbouring minimum moved 4 cm).
     pub fast_path_offset: f64,
-    /// The wide registration from the prediction that lands this close (m) to the fine
-    /// one's verified answer confirms it: the wide start from the last pose is skipped.
-    pub agreement: f64,
     /// A wide search's answer is polished by fine restarts this far (m) along each camera
     /// axis (0: none).
     pub restart_step: f64,
@@ -72,7 +69,6 @@ impl TrackerConfig {
             wide_source_voxel: 0.03,
             restart_source_voxel: 0.06,
             fast_path_offset: 0.025,
-            agreement: 0.01,
             verify: VerifyConfig::default(),
             relocalise: RelocaliseConfig::default(),
             keyframe_overlap: 0.81,

@@ -449,7 +449,6 @@ impl FrameTracker {
         let mut best: Option<Registration> = None;
         // Whether `best` was registered with every point (the fine attempt's answer).
         let mut best_is_full = false;
-        let mut fine_answer: Option<Pose> = None;
         let mut attempt: Verified = Err("no registration tried".into());
         let mut wide: Option<String> = None;
         // Made when the wide search starts (most frames never need it).
@@ -479,24 +478,12 @@ impl FrameTracker {
                     thin.get_or_insert_with(|| cloud.voxel_subsample(self.config.wide_source_voxel))
                 }
             };
-            let mut agreed = false;
             match self.register_verified(frame, source, &start, kind, Some(&prior)) {
-                Ok(r) => {
-                    // The fine and the wide registration from the prediction agree: a third
-                    // start would only confirm them (the polish below still looks around).
-                    agreed = !full
-                        && fine_answer.is_some_and(|f| {
-                            (f.inverse() * r.transform).translation.vector.norm()
-                                <= self.config.agreement
-                        });
-                    if full {
-                        fine_answer = Some(r.transform);
-                    }
-                    if best.as_ref().is_none_or(|b| r.fitness > b.fitness) {
-                        best = Some(r);
-                        best_is_full = full;
-                    }
+                Ok(r) if best.as_ref().is_none_or(|b| r.fitness > b.fitness) => {
+                    best = Some(r);
+                    best_is_full = full;
                 }
+                Ok(_) => {}
                 Err(why) => attempt = Err(why),
             }
             // Between consecutive frames, a verified fine registration that lands near the
@@ -508,7 +495,7 @@ impl FrameTracker {
                     .norm()
                     <= self.config.fast_path_offset
             };
-            if agreed || (k == 0 && !gap && best.as_ref().is_some_and(near)) {
+            if k == 0 && !gap && best.as_ref().is_some_and(near) {
                 break;
             }
         }

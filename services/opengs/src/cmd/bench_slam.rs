@@ -227,7 +227,7 @@ pub fn run(args: BenchSlamArgs) -> anyhow::Result<()> {
         },
         args.segmenter,
         args.max_rate
-            .map_or("recorded rate (30 Hz)".to_string(), |r| format!(
+            .map_or("as recorded (30 Hz, gaps kept)".to_string(), |r| format!(
                 "max rate {r} Hz"
             )),
         opengs.display(),

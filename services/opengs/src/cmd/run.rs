@@ -27,7 +27,8 @@ pub struct RunArgs {
     /// Run directory (default: runs/<timestamp>/).
     #[arg(long)]
     pub out: Option<PathBuf>,
-    /// Sensor rate cap in frames/s (0 = as fast as possible). Default: the dataset's rate;
+    /// Sensor rate cap in frames/s (0 = as fast as possible). Default: as recorded (each
+    /// frame its timestamp's step after the previous one, so dropped frames keep their gap);
     /// for the synthetic room 10 Hz, because ray-casting it at 30 Hz takes most of a 2-core
     /// machine and would starve the mapper (a slower replay, like `rosbag play -r`).
     #[arg(long, value_name = "HZ", value_parser = cli_values::rate, allow_hyphen_values = true)]
