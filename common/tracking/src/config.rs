@@ -28,9 +28,9 @@ pub struct TrackerConfig {
     /// Fine iterations of a wide search's registrations and of a polishing restart.
     pub wide_iterations: usize,
     pub polish_iterations: usize,
-    /// The wide search and its polishing restarts register a source thinned to one point per
-    /// voxel of this side (m; 0: every point); only their winner is refined with every point.
-    /// They are exploratory, and nine of them at full size cost a gap frame 200+ ms.
+    /// The wide search's registrations use a source thinned to one point per voxel of this
+    /// side (m; 0: every point); only the winner is refined with every point. They are
+    /// exploratory, and at full size they cost a gap frame 200+ ms.
     pub wide_source_voxel: f64,
     /// The polishing restarts register a source thinned further, to one point per voxel of
     /// this side (m): they only choose a basin, and the winner is refined with every point.
