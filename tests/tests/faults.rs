@@ -352,3 +352,76 @@ fn a_corrupt_frame_stops_the_run_naming_it() {
         "{trajectory}"
     );
 }
+
+/// A recording's gap is replayed as a gap, and a gap longer than the sensor's watchdog is
+/// not a hang: the waiting sensor keeps sending heartbeats (before: silent for the whole
+/// gap, so a 12 s gap under the 10 s watchdog killed and restarted it). Here a 2.5 s gap
+/// under a 1 s watchdog.
+#[test]
+fn a_gap_in_the_recording_is_waited_out_not_taken_for_a_hang() {
+    let _serial = serial();
+    let dir = tempfile::tempdir().expect("tmp");
+    let data = dir.path().join("tum");
+    let synth = Command::new(opengs_e2e::binary("opengs"))
+        .args(["synth", "--frames", "20", "--format", "tum", "--out"])
+        .arg(&data)
+        .output()
+        .expect("synth");
+    assert!(synth.status.success());
+    // Frames 10 and after come 2.5 s later than recorded.
+    for list in ["rgb.txt", "depth.txt", "groundtruth.txt"] {
+        let path = data.join(list);
+        let text = std::fs::read_to_string(&path).expect(list);
+        let mut frame = 0;
+        let shifted: Vec<String> = text
+            .lines()
+            .map(|line| {
+                let Some((stamp, rest)) = line.split_once(' ') else {
+                    return line.to_string();
+                };
+                match stamp.parse::<f64>() {
+                    Ok(t) if !line.starts_with('#') => {
+                        frame += 1;
+                        let t = if frame > 10 { t + 2.5 } else { t };
+                        format!("{t:.6} {rest}")
+                    }
+                    _ => line.to_string(),
+                }
+            })
+            .collect();
+        std::fs::write(&path, shifted.join("\n") + "\n").expect(list);
+    }
+    let desktop = std::fs::read_to_string(
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../deploy/desktop.toml"),
+    )
+    .expect("desktop.toml");
+    let deploy = dir.path().join("impatient.toml");
+    std::fs::write(&deploy, format!("{desktop}watchdog_s = 1\n")).expect("deploy");
+    assert!(
+        desktop.trim_end().ends_with("role = \"source\""),
+        "the sensor is last"
+    );
+    let out = dir.path().join("run");
+    let started = Instant::now();
+    let run = opengs_run(&format!("t{}-gap", std::process::id()), &out)
+        .arg("--dataset")
+        .arg(format!("tum:{}", data.display()))
+        .arg("--deploy")
+        .arg(&deploy)
+        .args(["--finish-steps", "0"])
+        .output()
+        .expect("run");
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    assert!(run.status.success(), "{stderr}");
+    assert!(
+        started.elapsed() >= Duration::from_millis(2500),
+        "the gap was replayed"
+    );
+    assert_eq!(stage_record(&out, "sensor")["restarts"], 0, "{stderr}");
+    let trajectory = std::fs::read_to_string(out.join("trajectory.txt")).expect("trajectory");
+    assert_eq!(
+        trajectory.lines().filter(|l| !l.starts_with('#')).count(),
+        20,
+        "{trajectory}"
+    );
+}

@@ -8,6 +8,7 @@ use opengs_ipc_schema::service::FRAMES;
 use opengs_ipc_schema::{now_ns, FrameHeader, FrameParts, MessageKind, Stamp};
 use opengs_runtime::{
     waitset, CallbackProgression, Outlet, RunContext, TelemetrySink, WaitSet, WaitSetRunResult,
+    HEARTBEAT,
 };
 
 use crate::pacing::{Pacer, ANNOUNCED_GAP, LONGEST_GAP};
@@ -35,10 +36,13 @@ pub struct SensorArgs {
 /// How often a live sensor with nothing to publish looks for appended frames.
 const LIVE_POLL: Duration = Duration::from_millis(200);
 
-/// Sleeps in the WaitSet until `due`; whether a termination signal came first.
-fn wait_until(ws: &WaitSet, due: Instant) -> anyhow::Result<bool> {
+/// Sleeps in the WaitSet until `due`, with a heartbeat at least every [`HEARTBEAT`] (a
+/// recording's gap may be longer than the watchdog's patience); whether a termination
+/// signal came first.
+fn wait_until(ws: &WaitSet, telemetry: &TelemetrySink, due: Instant) -> anyhow::Result<bool> {
     loop {
-        let pause = due.saturating_duration_since(Instant::now());
+        telemetry.alive();
+        let pause = due.saturating_duration_since(Instant::now()).min(HEARTBEAT);
         // Returns after the pause, or at once with a pending SIGINT/SIGTERM.
         match ws.wait_and_process_once_with_timeout(|_| CallbackProgression::Continue, pause) {
             Ok(WaitSetRunResult::TerminationRequest | WaitSetRunResult::Interrupt) => {
@@ -136,7 +140,7 @@ pub fn run_sensor(ctx: &RunContext, args: &SensorArgs) -> anyhow::Result<()> {
             }
             if index >= source.len() {
                 // While waiting for a recorder, sleep in the WaitSet rather than spin.
-                if wait_until(&ws, Instant::now() + LIVE_POLL / 4)? {
+                if wait_until(&ws, &telemetry, Instant::now() + LIVE_POLL / 4)? {
                     break true;
                 }
                 continue;
@@ -158,7 +162,7 @@ pub fn run_sensor(ctx: &RunContext, args: &SensorArgs) -> anyhow::Result<()> {
                 }
             );
         }
-        if wait_until(&ws, pacer.due(frame.timestamp, Instant::now()))? {
+        if wait_until(&ws, &telemetry, pacer.due(frame.timestamp, Instant::now()))? {
             break true;
         }
         let start = now_ns();
