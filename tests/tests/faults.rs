@@ -67,6 +67,27 @@ fn faulted_run_with(
     (out, stderr)
 }
 
+/// The synthetic room's first `frames` frames written as a TUM folder at `data`.
+fn synth_tum(data: &Path, frames: usize) {
+    let synth = Command::new(opengs_e2e::binary("opengs"))
+        .args([
+            "synth",
+            "--format",
+            "tum",
+            "--frames",
+            &frames.to_string(),
+            "--out",
+        ])
+        .arg(data)
+        .output()
+        .expect("synth");
+    assert!(
+        synth.status.success(),
+        "{}",
+        String::from_utf8_lossy(&synth.stderr)
+    );
+}
+
 fn stage_record(out: &Path, name: &str) -> serde_json::Value {
     let record: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("run.json")).expect("run.json"))
@@ -317,12 +338,7 @@ fn a_corrupt_frame_stops_the_run_naming_it() {
     let _serial = serial();
     let dir = tempfile::tempdir().expect("tmp");
     let data = dir.path().join("tum");
-    let synth = Command::new(opengs_e2e::binary("opengs"))
-        .args(["synth", "--frames", "40", "--format", "tum", "--out"])
-        .arg(&data)
-        .output()
-        .expect("synth");
-    assert!(synth.status.success());
+    synth_tum(&data, 40);
     let mut depth: Vec<PathBuf> = std::fs::read_dir(data.join("depth"))
         .expect("depth dir")
         .filter_map(|e| e.ok().map(|e| e.path()))
@@ -362,12 +378,7 @@ fn a_gap_in_the_recording_is_waited_out_not_taken_for_a_hang() {
     let _serial = serial();
     let dir = tempfile::tempdir().expect("tmp");
     let data = dir.path().join("tum");
-    let synth = Command::new(opengs_e2e::binary("opengs"))
-        .args(["synth", "--frames", "20", "--format", "tum", "--out"])
-        .arg(&data)
-        .output()
-        .expect("synth");
-    assert!(synth.status.success());
+    synth_tum(&data, 20);
     // Frames 10 and after come 2.5 s later than recorded.
     for list in ["rgb.txt", "depth.txt", "groundtruth.txt"] {
         let path = data.join(list);
