@@ -46,29 +46,40 @@ impl ContinuityMap {
 impl Continuity {
     /// Continuity along rows and columns. Inverse depth w = 1/z is affine
     /// in pixel coordinates on any plane, so a step is judged by how far
-    /// w_b misses the line through w_a and the pixel before it (or w_b and
-    /// the one after): a slanted floor seen at a grazing angle has large
-    /// but regular steps; an occluding edge breaks the line on both sides.
+    /// w_b misses the line continued from a's side (through a and the two
+    /// pixels before it) or from b's side (b and the two after it): a
+    /// slanted floor seen at a grazing angle has large but regular steps;
+    /// an occluding edge breaks the line on both sides. The line needs
+    /// three pixels: through two, one mixed pixel between a chair seat and
+    /// the floor behind it halves the step and passes for a steep plane.
     pub fn map(&self, depth_m: &[f32], width: usize, height: usize) -> ContinuityMap {
         let inv: Vec<f32> = depth_m
             .iter()
             .map(|&z| if z > 0.0 { 1.0 / z } else { 0.0 })
             .collect();
-        let judge = |before: Option<usize>, a: usize, b: usize, after: Option<usize>| {
+        let tolerance = |w: f32| self.max_jump * w + self.inverse_noise;
+        let valid = |p: Option<usize>| p.map(|p| inv[p]).filter(|&w| w > 0.0);
+        // The per-pixel slope of the line through `w` and the two valid
+        // pixels beyond it (`near`, then `far`), when those three are one line.
+        let slope = |w: f32, near: Option<usize>, far: Option<usize>| {
+            let (near, far) = (valid(near)?, valid(far)?);
+            let (outer, inner) = (near - far, w - near);
+            ((inner - outer).abs() <= tolerance(w.max(near).max(far))).then_some(inner)
+        };
+        let judge = |before: [Option<usize>; 2], a: usize, b: usize, after: [Option<usize>; 2]| {
             let (wa, wb) = (inv[a], inv[b]);
             if wa <= 0.0 || wb <= 0.0 {
                 return false;
             }
             let step = wb - wa;
-            let valid = |p: Option<usize>| p.map(|p| inv[p]).filter(|&w| w > 0.0);
-            // The slope continued from either side predicts the step.
-            let from_before = valid(before).map(|w| (step - (wa - w)).abs());
-            let from_after = valid(after).map(|w| (step - (w - wb)).abs());
+            let from_before = slope(wa, before[0], before[1]).map(|s| (step - s).abs());
+            // Seen from b's side the line runs backwards: its slope towards a is −s.
+            let from_after = slope(wb, after[0], after[1]).map(|s| (step + s).abs());
             let residual = [from_before, from_after]
                 .into_iter()
                 .flatten()
                 .fold(step.abs(), f32::min);
-            residual <= self.max_jump * wa.max(wb) + self.inverse_noise
+            residual <= tolerance(wa.max(wb))
         };
         let mut right = vec![false; width * height];
         let mut down = vec![false; width * height];
@@ -76,13 +87,19 @@ impl Continuity {
             for x in 0..width {
                 let i = y * width + x;
                 if x + 1 < width {
-                    let before = (x > 0).then(|| i - 1);
-                    let after = (x + 2 < width).then(|| i + 2);
+                    let before = [(x > 0).then(|| i - 1), (x > 1).then(|| i - 2)];
+                    let after = [
+                        (x + 2 < width).then(|| i + 2),
+                        (x + 3 < width).then(|| i + 3),
+                    ];
                     right[i] = judge(before, i, i + 1, after);
                 }
                 if y + 1 < height {
-                    let before = (y > 0).then(|| i - width);
-                    let after = (y + 2 < height).then(|| i + 2 * width);
+                    let before = [(y > 0).then(|| i - width), (y > 1).then(|| i - 2 * width)];
+                    let after = [
+                        (y + 2 < height).then(|| i + 2 * width),
+                        (y + 3 < height).then(|| i + 3 * width),
+                    ];
                     down[i] = judge(before, i, i + width, after);
                 }
             }
@@ -236,6 +253,31 @@ mod tests {
         assert!(m.right[..5].iter().all(|&j| j), "{:?}", m.right);
         assert!(!m.right[5]);
         assert!(m.right[6]);
+    }
+
+    #[test]
+    fn one_mixed_pixel_between_two_surfaces_is_no_steep_plane() {
+        // A seat at 1.46 m, one pixel halfway in inverse depth, the floor at
+        // 2.12 m: the two equal steps lie on one line through two pixels
+        // (the old rule joined all three), but not through three.
+        let (seat, floor) = (1.0 / 1.46f32, 1.0 / 2.12f32);
+        let depth: Vec<f32> = [seat, seat, seat, 0.5 * (seat + floor), floor, floor, floor]
+            .iter()
+            .map(|w| 1.0 / w)
+            .collect();
+        let c = Continuity {
+            max_jump: 0.04,
+            inverse_noise: 0.0,
+            min_normal_cos: 0.5,
+            max_colour: 1.0,
+        };
+        let m = c.map(&depth, 7, 1);
+        assert_eq!(
+            m.right[..6],
+            [true, true, false, false, true, true],
+            "{:?}",
+            m.right
+        );
     }
 
     #[test]
