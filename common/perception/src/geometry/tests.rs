@@ -280,3 +280,49 @@ fn a_floor_split_by_an_occluder_stays_one_segment() {
         "without the join the floor is in pieces (largest {cover:.2})"
     );
 }
+
+/// A long low bench across the whole view leaves a strip of floor in front of it, about
+/// 2.5 % of the frame, and the floor behind it. The strip is no object of its own: it
+/// joins the floor behind (with the join from 5 % of the frame only, as it once was, it
+/// stayed a segment of its own and took a label of its own in the map).
+#[test]
+fn a_thin_strip_of_floor_in_front_of_a_bench_joins_the_floor_behind() {
+    let bench = Shape::Cuboid {
+        min: [-3.0, 0.0, 0.59],
+        max: [3.0, 0.4, 0.9],
+    };
+    let r = desk_view(vec![
+        floor(Paint::Checker(0.25, BLACK, WHITE)),
+        (bench, Paint::Plain(WOOD)),
+    ])
+    .render();
+    let w = WIDTH as usize;
+    let strip_rows = r
+        .object
+        .chunks(w)
+        .rev()
+        .take_while(|row| row.iter().all(|&o| o == 0))
+        .count();
+    let share = (strip_rows * w) as f32 / r.object.len() as f32;
+    assert!(
+        (0.01..0.04).contains(&share),
+        "strip is {share:.3} of the frame"
+    );
+    let seg = segment(&r);
+    assert_apart(&seg, &r, &[0, 1], "floor around a bench");
+    let strip_label = seg.label_map[r.object.len() - w / 2];
+    let far_label = seg.label_map[w / 2];
+    assert_eq!(r.object[w / 2], 0, "the top row sees the floor behind");
+    assert_eq!(strip_label, far_label);
+    let large_only = segment_with(
+        &r,
+        GeometryParams {
+            coplanar_min_share: 0.05,
+            ..GeometryParams::default()
+        },
+    );
+    assert_ne!(
+        large_only.label_map[r.object.len() - w / 2],
+        large_only.label_map[w / 2]
+    );
+}
