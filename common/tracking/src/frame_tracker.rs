@@ -18,10 +18,12 @@
 //! keyframe and adds nothing to the model. While lost, a relocalisation guess
 //! ([`crate::Relocaliser`]) is tried every 0.15 s until one verifies.
 
+use opengs_geometry::nalgebra::Matrix3;
 use opengs_geometry::{Intrinsics, Pose};
 use opengs_gicp::{
-    coarse_estimate, register_coarse_to_fine, sample_depth_grid, Cloud, CoarseToFine, GicpError,
-    Registration, RegistrationConfig,
+    coarse_estimate, estimate_covariances_on_grid, register_coarse_to_fine, regularize,
+    sample_depth_grid, Cloud, CoarseToFine, GicpError, Registration, RegistrationConfig,
+    Regularization,
 };
 
 use crate::model::{MapGaussians, ModelBuilder, ModelUpdate, TrackingModel};
@@ -88,6 +90,10 @@ pub struct TrackOutcome {
     pub overlap: f64,
     /// The frame's source cloud in the camera frame (points + covariances), when it had depth.
     pub source: Option<Cloud>,
+    /// The source points' covariances as the keyframe carries them to the mapper
+    /// ([`TrackerConfig::keyframe_shape`]), camera frame; empty without depth, or when the
+    /// shape is the registration's own (then `source` has it).
+    pub shapes: Vec<Matrix3<f64>>,
     /// What went wrong, for frames without a verified pose.
     pub failure: Option<String>,
     /// Models installed or refused since the previous frame.
@@ -108,7 +114,16 @@ pub struct WorldKeyframeCloud {
 impl TrackOutcome {
     /// The frame's source cloud moved into the world by its pose (what the mapper densifies from).
     pub fn world_cloud(&self) -> Option<WorldKeyframeCloud> {
-        let world = self.source.as_ref()?.transformed(&self.pose);
+        let source = self.source.as_ref()?;
+        let world = if self.shapes.len() == source.points.len() {
+            let shaped = Cloud {
+                points: source.points.clone(),
+                covariances: self.shapes.clone(),
+            };
+            shaped.transformed(&self.pose)
+        } else {
+            source.transformed(&self.pose)
+        };
         Some(WorldKeyframeCloud {
             points: world
                 .points
@@ -255,7 +270,9 @@ impl FrameTracker {
         self.builder.set_map(seq, gaussians, regularization);
     }
 
-    fn source_cloud(&self, frame: &DepthFrame) -> Result<Cloud, GicpError> {
+    /// The frame's samples with covariances regularised for registration, and for the
+    /// keyframe shape (both from one neighbour search).
+    fn source_cloud(&self, frame: &DepthFrame) -> Result<(Cloud, Vec<Matrix3<f64>>), GicpError> {
         let samples = sample_depth_grid(
             frame.depth,
             frame.depth_scale,
@@ -275,7 +292,22 @@ impl FrameTracker {
                 needed: self.config.min_points,
             });
         }
-        Cloud::from_depth_samples(&samples, self.config.neighbours, self.config.regularization)
+        let raw =
+            estimate_covariances_on_grid(&samples, self.config.neighbours, Regularization::None)?;
+        let reshape = |to: Regularization| raw.iter().map(|c| regularize(c, to)).collect();
+        let covariances = reshape(self.config.regularization);
+        let shapes = if self.config.keyframe_shape == self.config.regularization {
+            Vec::new()
+        } else {
+            reshape(self.config.keyframe_shape)
+        };
+        Ok((
+            Cloud {
+                points: samples.points,
+                covariances,
+            },
+            shapes,
+        ))
     }
 
     /// Installs the newest finished model; reports what the builder did.
@@ -303,7 +335,7 @@ impl FrameTracker {
         let mut updates = self.install(finished);
         let index = self.frames;
         self.frames += 1;
-        let cloud = match self.source_cloud(frame) {
+        let (cloud, shapes) = match self.source_cloud(frame) {
             Ok(c) => c,
             Err(e) => return self.without_depth(&e, updates),
         };
@@ -322,7 +354,9 @@ impl FrameTracker {
         }
         if self.motion.last().is_none() {
             self.last_timestamp = frame.timestamp;
-            return self.start(index, frame.timestamp, cloud, updates);
+            let mut out = self.start(index, frame.timestamp, cloud, updates);
+            out.shapes = shapes;
+            return out;
         }
         if self.model.is_none() {
             // Only before the first model: the second frame cannot do without it.
@@ -335,6 +369,7 @@ impl FrameTracker {
             true => self.relocalise(frame, index, cloud),
         };
         out.model_updates = updates;
+        out.shapes = shapes;
         out
     }
 
@@ -363,6 +398,7 @@ impl FrameTracker {
             failure: None,
             model_updates,
             wide_search: None,
+            shapes: Vec::new(),
         }
     }
 
@@ -679,6 +715,7 @@ impl FrameTracker {
             failure: None,
             model_updates: Vec::new(),
             wide_search: None,
+            shapes: Vec::new(),
         }
     }
 
@@ -715,6 +752,7 @@ impl FrameTracker {
             failure: Some(why),
             model_updates: Vec::new(),
             wide_search: None,
+            shapes: Vec::new(),
         }
     }
 
@@ -738,6 +776,7 @@ impl FrameTracker {
             failure: Some(e.to_string()),
             model_updates,
             wide_search: None,
+            shapes: Vec::new(),
         }
     }
 }

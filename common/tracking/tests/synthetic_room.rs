@@ -166,3 +166,55 @@ fn a_resumed_tracker_continues_from_the_last_pose_against_the_map() {
         moved * 100.0
     );
 }
+
+/// Registration uses thin discs, (1, 1, 1e-3); the keyframe carries the normalised ellipse
+/// the mapper seeds its Gaussians with: middle eigenvalue 1, the in-plane elongation kept.
+#[test]
+fn registration_uses_discs_and_the_keyframe_carries_ellipses() {
+    use opengs_geometry::nalgebra::{Matrix3, SymmetricEigen};
+    let mut spec: DatasetSpec = "synthetic".parse().expect("spec");
+    spec.synthetic.frames = Some(1);
+    let mut source = open_dataset(&spec).expect("dataset");
+    let k = source.intrinsics();
+    let f = source.frame(0).expect("frame");
+    let mut tracker = FrameTracker::new(TrackerConfig::tum());
+    let out = tracker.track(&depth_frame(&f.depth, &f, &k));
+    assert!(out.keyframe.is_some(), "the first frame is a keyframe");
+    let sorted = |c: &Matrix3<f64>| {
+        let mut e: Vec<f64> = SymmetricEigen::new(*c)
+            .eigenvalues
+            .iter()
+            .copied()
+            .collect();
+        e.sort_by(|a, b| b.total_cmp(a));
+        e
+    };
+    let registration = out.source.as_ref().expect("source cloud");
+    for c in &registration.covariances {
+        let e = sorted(c);
+        assert!(
+            (e[0] - 1.0).abs() < 1e-6 && (e[1] - 1.0).abs() < 1e-6,
+            "{e:?}"
+        );
+        assert!((e[2] - 1e-3).abs() < 1e-6, "{e:?}");
+    }
+    let keyframe = out.world_cloud().expect("world cloud");
+    assert_eq!(keyframe.covariances.len(), registration.points.len());
+    let mut elongated = 0;
+    for c in &keyframe.covariances {
+        let [xx, xy, xz, yy, yz, zz] = c.map(f64::from);
+        let e = sorted(&Matrix3::new(xx, xy, xz, xy, yy, yz, xz, yz, zz));
+        // A needle (collinear neighbours) is normalised by 1e-3 × its length instead.
+        let needle = (e[0] - 1e3).abs() < 1e-2;
+        assert!(
+            needle || (e[1] - 1.0).abs() < 1e-3,
+            "middle eigenvalue {e:?}"
+        );
+        elongated += usize::from(e[0] > 1.2);
+    }
+    let share = elongated as f64 / keyframe.covariances.len() as f64;
+    assert!(
+        share > 0.1,
+        "only {share:.3} of the keyframe's shapes are elongated"
+    );
+}
