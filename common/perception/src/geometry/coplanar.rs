@@ -9,7 +9,7 @@
 //!   on(i)       ⇔  nᵢ·n̄ ≥ cos(max_angle) ∧ |n̄·(cᵢ − c̄)| ≤ tol(s)
 //!   planar(s)   ⇔  Σ_{on(i)} wᵢ ≥ min_inliers · Σ wᵢ;  then n̄, c̄ refitted on the on(i)
 //!   join(a, b)  ⇔  both large and planar, no boundary between them,
-//!                  ∠(n̄a, n̄b) ≤ max_angle, |n̄a·(c̄b − c̄a)| ≤ tol(b)   (a the larger)
+//!                  ∠(n̄a, n̄b) ≤ max_angle, |n̄a·(c̄b − c̄a)| ≤ tol(a), |n̄b·(c̄a − c̄b)| ≤ tol(b)
 //!   tol(s)      =  offset_scale · depth of c̄
 //! ```
 //!
@@ -173,15 +173,9 @@ impl CoplanarRules {
                 if ga == gb || dot(pa.normal, pb.normal) < min_cos {
                     continue;
                 }
-                // The smaller piece's centroid on the larger piece's plane: a few patches'
-                // normal, a degree off, would miss by centimetres over a metre's gap.
-                let (big, small) = if pa.pixels >= pb.pixels {
-                    (pa, pb)
-                } else {
-                    (pb, pa)
-                };
-                let gap = sub(small.centroid, big.centroid);
-                let coplanar = dot(big.normal, gap).abs() <= self.tolerance(small);
+                let gap = sub(pb.centroid, pa.centroid);
+                let coplanar = dot(pa.normal, gap).abs() <= self.tolerance(pa)
+                    && dot(pb.normal, gap).abs() <= self.tolerance(pb);
                 let touches = group[ga]
                     .iter()
                     .any(|&x| group[gb].iter().any(|&y| touch(large[x], large[y])));

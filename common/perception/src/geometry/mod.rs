@@ -92,9 +92,7 @@ pub struct GeometryParams {
     pub min_pixels: u32,
     /// Planar segments of at least this share of the frame that lie in one plane
     /// (normals within `coplanar_angle`, offsets within `offset_scale` per metre) and do
-    /// not touch are one surface seen around an occluder; 0 turns the join off. Small on
-    /// purpose: a strip of floor under a table is one or two percent of the frame, and
-    /// left apart it gets a label of its own that the consensus never merges back.
+    /// not touch are one surface seen around an occluder; 0 turns the join off.
     pub coplanar_min_share: f32,
     pub coplanar_angle: f32,
     /// Pixel share of a segment's patches that must lie on its plane (normal within
@@ -119,7 +117,7 @@ impl Default for GeometryParams {
             weak_evidence: 0.35,
             colour_cut: 0.3,
             min_pixels: 40,
-            coplanar_min_share: 0.005,
+            coplanar_min_share: 0.05,
             coplanar_angle: 0.1,
             coplanar_inliers: 0.9,
             seed: 0x6e0_5e9,
