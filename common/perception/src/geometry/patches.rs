@@ -235,6 +235,14 @@ mod tests {
     use super::*;
     use opengs_geometry::Intrinsics;
 
+    /// What `map` reads: 4 % steps and no noise (normal and colour limits do not enter it).
+    const ONE_ROW: Continuity = Continuity {
+        max_jump: 0.04,
+        inverse_noise: 0.0,
+        min_normal_cos: 0.5,
+        max_colour: 1.0,
+    };
+
     #[test]
     fn grazing_planes_are_continuous_and_occlusions_are_not() {
         // One row: a plane at a grazing angle (1/z affine, 10 % steps),
@@ -243,12 +251,7 @@ mod tests {
             .map(|u| 1.0 / (1.0 - 0.09 * u as f32))
             .chain([1.0, 1.0])
             .collect();
-        let c = Continuity {
-            max_jump: 0.04,
-            inverse_noise: 0.0,
-            min_normal_cos: 0.5,
-            max_colour: 1.0,
-        };
+        let c = ONE_ROW;
         let m = c.map(&depth, 8, 1);
         assert!(m.right[..5].iter().all(|&j| j), "{:?}", m.right);
         assert!(!m.right[5]);
@@ -265,12 +268,7 @@ mod tests {
             .iter()
             .map(|w| 1.0 / w)
             .collect();
-        let c = Continuity {
-            max_jump: 0.04,
-            inverse_noise: 0.0,
-            min_normal_cos: 0.5,
-            max_colour: 1.0,
-        };
+        let c = ONE_ROW;
         let m = c.map(&depth, 7, 1);
         assert_eq!(
             m.right[..6],
