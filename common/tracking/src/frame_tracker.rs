@@ -90,10 +90,11 @@ pub struct TrackOutcome {
     pub overlap: f64,
     /// The frame's source cloud in the camera frame (points + covariances), when it had depth.
     pub source: Option<Cloud>,
-    /// The source points' covariances as the keyframe carries them to the mapper
-    /// ([`TrackerConfig::keyframe_shape`]), camera frame; empty without depth, or when the
-    /// shape is the registration's own (then `source` has it).
-    pub shapes: Vec<Matrix3<f64>>,
+    /// The source points' neighbourhood covariances before regularisation (camera frame;
+    /// empty without depth) and the shape a keyframe gives them for the mapper
+    /// ([`TrackerConfig::keyframe_shape`]): regularised only when a keyframe is sent.
+    pub raw_covariances: Vec<Matrix3<f64>>,
+    pub keyframe_shape: Regularization,
     /// What went wrong, for frames without a verified pose.
     pub failure: Option<String>,
     /// Models installed or refused since the previous frame.
@@ -115,24 +116,26 @@ impl TrackOutcome {
     /// The frame's source cloud moved into the world by its pose (what the mapper densifies from).
     pub fn world_cloud(&self) -> Option<WorldKeyframeCloud> {
         let source = self.source.as_ref()?;
-        let world = if self.shapes.len() == source.points.len() {
-            let shaped = Cloud {
-                points: source.points.clone(),
-                covariances: self.shapes.clone(),
-            };
-            shaped.transformed(&self.pose)
+        let pose = &self.pose;
+        let r = pose.rotation.to_rotation_matrix().into_inner();
+        let shaped: Vec<Matrix3<f64>> = if self.raw_covariances.len() == source.points.len() {
+            self.raw_covariances
+                .iter()
+                .map(|c| regularize(c, self.keyframe_shape))
+                .collect()
         } else {
-            source.transformed(&self.pose)
+            source.covariances.clone()
         };
         Some(WorldKeyframeCloud {
-            points: world
+            points: source
                 .points
                 .iter()
+                .map(|p| pose * p)
                 .map(|p| [p.x as f32, p.y as f32, p.z as f32])
                 .collect(),
-            covariances: world
-                .covariances
+            covariances: shaped
                 .iter()
+                .map(|c| r * c * r.transpose())
                 .map(|c| {
                     [
                         c[(0, 0)],
@@ -270,8 +273,8 @@ impl FrameTracker {
         self.builder.set_map(seq, gaussians, regularization);
     }
 
-    /// The frame's samples with covariances regularised for registration, and for the
-    /// keyframe shape (both from one neighbour search).
+    /// The frame's samples with covariances regularised for registration, and the raw
+    /// covariances a keyframe reshapes (one neighbour search for both).
     fn source_cloud(&self, frame: &DepthFrame) -> Result<(Cloud, Vec<Matrix3<f64>>), GicpError> {
         let samples = sample_depth_grid(
             frame.depth,
@@ -294,19 +297,16 @@ impl FrameTracker {
         }
         let raw =
             estimate_covariances_on_grid(&samples, self.config.neighbours, Regularization::None)?;
-        let reshape = |to: Regularization| raw.iter().map(|c| regularize(c, to)).collect();
-        let covariances = reshape(self.config.regularization);
-        let shapes = if self.config.keyframe_shape == self.config.regularization {
-            Vec::new()
-        } else {
-            reshape(self.config.keyframe_shape)
-        };
+        let covariances = raw
+            .iter()
+            .map(|c| regularize(c, self.config.regularization))
+            .collect();
         Ok((
             Cloud {
                 points: samples.points,
                 covariances,
             },
-            shapes,
+            raw,
         ))
     }
 
@@ -335,7 +335,7 @@ impl FrameTracker {
         let mut updates = self.install(finished);
         let index = self.frames;
         self.frames += 1;
-        let (cloud, shapes) = match self.source_cloud(frame) {
+        let (cloud, raw) = match self.source_cloud(frame) {
             Ok(c) => c,
             Err(e) => return self.without_depth(&e, updates),
         };
@@ -355,7 +355,7 @@ impl FrameTracker {
         if self.motion.last().is_none() {
             self.last_timestamp = frame.timestamp;
             let mut out = self.start(index, frame.timestamp, cloud, updates);
-            out.shapes = shapes;
+            out.raw_covariances = raw;
             return out;
         }
         if self.model.is_none() {
@@ -369,7 +369,7 @@ impl FrameTracker {
             true => self.relocalise(frame, index, cloud),
         };
         out.model_updates = updates;
-        out.shapes = shapes;
+        out.raw_covariances = raw;
         out
     }
 
@@ -398,7 +398,8 @@ impl FrameTracker {
             failure: None,
             model_updates,
             wide_search: None,
-            shapes: Vec::new(),
+            raw_covariances: Vec::new(),
+            keyframe_shape: self.config.keyframe_shape,
         }
     }
 
@@ -715,7 +716,8 @@ impl FrameTracker {
             failure: None,
             model_updates: Vec::new(),
             wide_search: None,
-            shapes: Vec::new(),
+            raw_covariances: Vec::new(),
+            keyframe_shape: self.config.keyframe_shape,
         }
     }
 
@@ -752,7 +754,8 @@ impl FrameTracker {
             failure: Some(why),
             model_updates: Vec::new(),
             wide_search: None,
-            shapes: Vec::new(),
+            raw_covariances: Vec::new(),
+            keyframe_shape: self.config.keyframe_shape,
         }
     }
 
@@ -776,7 +779,8 @@ impl FrameTracker {
             failure: Some(e.to_string()),
             model_updates,
             wide_search: None,
-            shapes: Vec::new(),
+            raw_covariances: Vec::new(),
+            keyframe_shape: self.config.keyframe_shape,
         }
     }
 }
