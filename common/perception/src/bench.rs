@@ -34,7 +34,12 @@ struct BenchFrames {
 fn bench_frames(frames: usize, scene: u64) -> Result<BenchFrames, PerceptionError> {
     let mut spec = DatasetSpec::new(DatasetKind::Synthetic);
     spec.synthetic.scene = scene;
-    let mut source = open_dataset(&spec)?;
+    frames_of(frames, &spec)
+}
+
+/// `frames` frames spread evenly over the dataset of `spec`.
+fn frames_of(frames: usize, spec: &DatasetSpec) -> Result<BenchFrames, PerceptionError> {
+    let mut source = open_dataset(spec)?;
     let step = (source.len() / frames.max(1)).max(1);
     let list = (0..frames.max(1))
         .map(|i| source.frame((i * step) % source.len()))
@@ -227,9 +232,13 @@ pub struct SegmentQuality {
 }
 
 /// Scores geometry, classic, prior and simulated (the SAM-like reference, default failure
-/// rates) on `frames` frames of `scene` against the ground-truth instances ([`crate::quality`]).
-pub fn segment_quality(frames: usize, scene: u64) -> Result<Vec<SegmentQuality>, PerceptionError> {
-    let bench = bench_frames(frames, scene)?;
+/// rates) on `frames` frames spread over the dataset of `spec` against its ground-truth
+/// instances ([`crate::quality`]).
+pub fn segment_quality(
+    frames: usize,
+    spec: &DatasetSpec,
+) -> Result<Vec<SegmentQuality>, PerceptionError> {
+    let bench = frames_of(frames, spec)?;
     let kinds = [
         SegmenterKind::Geometry,
         SegmenterKind::Classic,
@@ -268,10 +277,12 @@ pub fn segment_quality(frames: usize, scene: u64) -> Result<Vec<SegmentQuality>,
 }
 
 /// Prints [`segment_quality`] as one line per segmenter.
-pub fn print_segment_quality(frames: usize, scene: u64) -> Result<(), PerceptionError> {
-    for q in segment_quality(frames, scene)? {
+pub fn print_segment_quality(frames: usize, spec: &DatasetSpec) -> Result<(), PerceptionError> {
+    let name = open_dataset(spec)?.name();
+    println!("{name}:");
+    for q in segment_quality(frames, spec)? {
         println!(
-            "quality/{:<9} scene {scene}: per-frame mIoU {:6.2}  objects split {:5.1} %  segments merging objects {:5.1} %  {:.1} segments  median {:6.2} ms  ({} frames with objects)",
+            "quality/{:<9} per-frame mIoU {:6.2}  objects split {:5.1} %  segments merging objects {:5.1} %  {:.1} segments  median {:6.2} ms  ({} frames with objects)",
             q.name,
             q.miou,
             100.0 * q.split_share,
@@ -554,9 +565,16 @@ mod tiny {
 mod tests {
     use super::*;
 
+    fn synthetic(frames: usize, noise: bool) -> DatasetSpec {
+        let mut spec = DatasetSpec::new(DatasetKind::Synthetic);
+        spec.synthetic.frames = Some(frames);
+        spec.synthetic.noise = noise.then(opengs_datasets::DepthNoise::default);
+        spec
+    }
+
     #[test]
     fn quality_scores_truth_perfect_and_geometry_above_classic() {
-        let q = segment_quality(3, 0).expect("synthetic room");
+        let q = segment_quality(3, &DatasetSpec::new(DatasetKind::Synthetic)).expect("room");
         let by_name = |name: &str| q.iter().find(|q| q.name == name).expect(name);
         let prior = by_name("prior");
         assert_eq!(prior.frames, 3);
@@ -568,5 +586,37 @@ mod tests {
             geometry.miou > classic.miou + 10.0 && geometry.split_share < classic.split_share,
             "{geometry:?} vs {classic:?}"
         );
+    }
+
+    #[test]
+    fn quality_reads_a_tum_folder_with_labels_as_the_frames_it_was_written_from() {
+        let dir = tempfile::tempdir().expect("temp dir");
+        let spec = synthetic(6, true);
+        let mut source = open_dataset(&spec).expect("synthetic");
+        opengs_datasets::write_dataset(
+            source.as_mut(),
+            dir.path(),
+            opengs_datasets::DatasetFormat::Tum,
+            &mut |_, _| {},
+        )
+        .expect("written");
+        let folder = DatasetSpec::new(
+            format!("tum:{}", dir.path().display())
+                .parse()
+                .expect("kind"),
+        );
+        let (direct, read) = (
+            segment_quality(2, &spec).expect("direct"),
+            segment_quality(2, &folder).expect("folder"),
+        );
+        for (a, b) in direct.iter().zip(&read) {
+            assert_eq!((&a.name, a.frames), (&b.name, b.frames));
+            // The same frames, through PNG and 16-bit millimetres: the same segments.
+            assert!((a.miou - b.miou).abs() < 1.0, "{a:?} vs {b:?}");
+        }
+        // A folder without instance labels is refused by name, not scored as 0.
+        std::fs::remove_file(dir.path().join("labels.txt")).expect("removed");
+        let err = segment_quality(2, &folder).expect_err("no labels");
+        assert!(err.to_string().contains("labels"), "{err}");
     }
 }

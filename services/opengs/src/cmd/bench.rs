@@ -63,6 +63,14 @@ enum BenchWhat {
         /// With --quality: room of the scene suite (0 = the fixed room).
         #[arg(long, default_value_t = 0)]
         scene: u64,
+        /// With --quality: the frames to score, `synthetic` or any dataset with instance
+        /// labels (`tum:DIR` with a labels/ folder, as `opengs bench slam` writes them).
+        #[arg(long, default_value = "synthetic")]
+        dataset: String,
+        /// With --quality, synthetic only: Kinect-like depth noise and missing depth, as a
+        /// real sensor gives.
+        #[arg(long)]
+        noise: bool,
     },
 }
 
@@ -96,9 +104,20 @@ pub fn run(args: BenchArgs) -> anyhow::Result<()> {
             frames,
             quality: true,
             scene,
+            dataset,
+            noise,
             ..
-        } => Ok(opengs_perception::bench::print_segment_quality(
-            frames, scene,
-        )?),
+        } => {
+            let spec = opengs_pipeline::DatasetArgs {
+                dataset,
+                scene,
+                noise,
+                ..Default::default()
+            }
+            .spec()?;
+            Ok(opengs_perception::bench::print_segment_quality(
+                frames, &spec,
+            )?)
+        }
     }
 }
