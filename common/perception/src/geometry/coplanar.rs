@@ -19,6 +19,8 @@
 
 use std::collections::HashSet;
 
+use opengs_geometry::nalgebra::{Matrix3, Vector3};
+
 use super::convexity::PatchEdge;
 use super::patches::PatchStats;
 use crate::classic::labels::compact_components;
@@ -35,7 +37,17 @@ pub struct CoplanarRules {
     pub offset_scale: f32,
     /// Pixel share of a segment's patches that must lie on its plane for it to be planar.
     pub min_inliers: f32,
+    /// How far a patch's normal strays from its plane under the frame's depth noise, in
+    /// radians per metre of depth for a patch one coarse pixel wide (σ(z) over the patch's
+    /// width, √pixels); a patch's angle allowance is the larger of that and `max_angle`
+    /// (Kinect-like noise: 10° at 3.4 m for a full patch, so a flat wall would otherwise
+    /// count as curved and the floor around a table stay in pieces).
+    pub normal_noise: f32,
 }
+
+/// The angle allowance never exceeds this (radians): a noisy frame must not make a box's
+/// faces one plane.
+const FLAT_LIMIT: f32 = 0.5;
 
 /// A segment's plane and how well its patches fit it.
 #[derive(Debug, Clone, Copy)]
@@ -53,6 +65,36 @@ fn dot(a: [f32; 3], b: [f32; 3]) -> f32 {
 fn sub(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
     [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
 }
+
+/// The normal of the plane through a segment's patch centroids (least eigenvector of their
+/// spread), turned to agree with `mean_normal`; `None` when the centroids do not span a
+/// plane (a strip, one patch) or it leans more than `FLAT_LIMIT` from the mean normal.
+/// Depth noise runs along the rays and tilts averaged pixel normals by a few hundredths of
+/// a radian, which over a floor 3 m deep puts its far end off its own plane; the centroids
+/// average it out.
+fn centroid_normal(spread: &Matrix3<f64>, mean_normal: [f32; 3]) -> Option<[f32; 3]> {
+    let eigen = spread.symmetric_eigen();
+    let mut order = [0, 1, 2];
+    order.sort_by(|&a, &b| eigen.eigenvalues[a].total_cmp(&eigen.eigenvalues[b]));
+    let (least, middle) = (eigen.eigenvalues[order[0]], eigen.eigenvalues[order[1]]);
+    if !(middle > MIN_SPREAD && least < SPAN_RATIO * middle) {
+        return None;
+    }
+    let v = eigen.eigenvectors.column(order[0]);
+    let mean = Vector3::from(mean_normal.map(f64::from));
+    let cos = v.dot(&mean);
+    if cos.abs() < f64::from(FLAT_LIMIT.cos()) {
+        return None;
+    }
+    let n = v * cos.signum();
+    Some([n[0] as f32, n[1] as f32, n[2] as f32])
+}
+
+/// Least over middle eigenvalue of the centroid spread below which the centroids span a plane …
+const SPAN_RATIO: f64 = 0.1;
+/// … whose middle eigenvalue (m², pixel-weighted mean) is at least this: centroids spread
+/// 2 cm or more both ways, not a line.
+const MIN_SPREAD: f64 = 0.02 * 0.02;
 
 impl CoplanarRules {
     fn tolerance(&self, p: &Plane) -> f32 {
@@ -79,7 +121,8 @@ impl CoplanarRules {
             }
             *w += u64::from(st.pixels);
         }
-        sums.iter()
+        let mut planes: Vec<Plane> = sums
+            .iter()
             .map(|(n, c, w)| {
                 let len = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
                 let w = (*w).max(1) as f64;
@@ -98,12 +141,33 @@ impl CoplanarRules {
                     planar: len > 0.0,
                 }
             })
-            .collect()
+            .collect();
+        // Spread of the patch centroids about each segment's centroid (pixel-weighted).
+        let mut spread = vec![Matrix3::<f64>::zeros(); count];
+        for (i, (st, &s)) in stats.iter().zip(segment_of_patch).enumerate() {
+            if !keep(i) {
+                continue;
+            }
+            let p = &planes[s as usize];
+            let d = Vector3::from(sub(st.centroid, p.centroid).map(f64::from));
+            spread[s as usize] += d * d.transpose() * f64::from(st.pixels);
+        }
+        for (p, m) in planes.iter_mut().zip(&spread) {
+            if let Some(n) = centroid_normal(&(m / f64::from(p.pixels.max(1))), p.normal) {
+                p.normal = n;
+            }
+        }
+        planes
     }
 
     fn on_plane(&self, st: &PatchStats, p: &Plane) -> bool {
         let offset = dot(p.normal, sub(st.centroid, p.centroid));
-        dot(st.normal, p.normal) >= self.max_angle.cos() && offset.abs() <= self.tolerance(p)
+        let width = (st.pixels.max(1) as f32).sqrt();
+        let allowance = self
+            .max_angle
+            .max(self.normal_noise * st.centroid[2].abs() / width);
+        dot(st.normal, p.normal) >= allowance.min(FLAT_LIMIT).cos()
+            && offset.abs() <= self.tolerance(p)
     }
 
     /// Each segment's plane, fitted on the patches that lie on its all-patch mean plane; planar
@@ -225,6 +289,7 @@ mod tests {
         max_angle: 0.1,
         offset_scale: 0.012,
         min_inliers: 0.9,
+        normal_noise: 0.0,
     };
 
     #[test]
@@ -355,5 +420,73 @@ mod tests {
         ];
         let (seg, count) = RULES.join(&stats, &[], &[0, 1, 1, 2], 3);
         assert_eq!(count, 3, "{seg:?}");
+    }
+
+    /// Two floor pieces either side of a table, patches from 1.5 to 4 m deep on y = 1.2,
+    /// `per_piece` patches each, with normals `normal_of(i)`.
+    fn floor_pieces(per_piece: usize, normal_of: impl Fn(usize) -> [f32; 3]) -> Vec<PatchStats> {
+        let mut stats = Vec::new();
+        for x in [-1.2f32, 0.8] {
+            for i in 0..per_piece {
+                let (col, row) = ((i % 4) as f32, (i / 4) as f32);
+                let z = 1.5 + 2.5 * row / ((per_piece / 4 - 1).max(1) as f32);
+                stats.push(patch(64, [x + 0.1 * col, 1.2, z], normal_of(i)));
+            }
+        }
+        stats
+    }
+
+    #[test]
+    fn floor_pieces_whose_normals_lean_toward_the_camera_join_through_their_centroids() {
+        // Depth noise along the rays leans the averaged normals 0.04 rad toward the camera:
+        // a plane from the mean normal misses the far patches by 5 cm (1.25 m × 0.04) against
+        // a 3.3 cm allowance, so the pieces would not be planar; the centroids lie on y = 1.2.
+        let (c, s) = (0.04f32.cos(), 0.04f32.sin());
+        let stats = floor_pieces(24, |_| [0.0, -c, -s]);
+        let segment_of_patch: Vec<u32> = (0..48).map(|i| u32::from(i >= 24)).collect();
+        let planes = RULES.planes(&stats, &segment_of_patch, 2);
+        for p in &planes {
+            assert!(p.planar, "{p:?}");
+            assert!(dot(p.normal, [0.0, -1.0, 0.0]) > 0.9999, "{p:?}");
+        }
+        let (_, count) = RULES.join(&stats, &[], &segment_of_patch, 2);
+        assert_eq!(count, 1, "one floor");
+    }
+
+    #[test]
+    fn noisy_patch_normals_count_on_the_plane_by_the_frames_noise() {
+        // Patch normals scattered ±0.12 rad about the floor's, as Kinect-like noise leaves
+        // them 2–3 m away: beyond the 0.1 rad of a clean frame, within a noisy frame's
+        // allowance (0.8 rad per metre and pixel of width: 0.8 × 1.5 m / 8 px = 0.15 rad at
+        // the nearest patches).
+        let tilt = |i: usize| {
+            let a: f32 = if i.is_multiple_of(2) { 0.12 } else { -0.12 };
+            [a.sin(), -a.cos(), 0.0]
+        };
+        let stats = floor_pieces(24, tilt);
+        let segment_of_patch: Vec<u32> = (0..48).map(|i| u32::from(i >= 24)).collect();
+        let (_, clean) = RULES.join(&stats, &[], &segment_of_patch, 2);
+        assert_eq!(
+            clean, 2,
+            "a clean frame's allowance calls the pieces curved"
+        );
+        let noisy = CoplanarRules {
+            normal_noise: 0.8,
+            ..RULES
+        };
+        let (_, count) = noisy.join(&stats, &[], &segment_of_patch, 2);
+        assert_eq!(count, 1, "a noisy frame's allowance sees one floor");
+        // However noisy the frame, a box's top and its side are never one plane.
+        let very_noisy = CoplanarRules {
+            normal_noise: 50.0,
+            ..RULES
+        };
+        let side = [-1.0, 0.0, 0.0];
+        let mut faces = vec![patch(400, [0.0, 0.5, 2.0], [0.0, -1.0, 0.0])];
+        faces.push(patch(400, [0.3, 0.6, 2.0], side));
+        let (_, count) = very_noisy.join(&faces, &[], &[0, 0], 1);
+        assert_eq!(count, 1);
+        let planes = very_noisy.planes(&faces, &[0, 0], 1);
+        assert!(!planes[0].planar, "{:?}", planes[0]);
     }
 }

@@ -237,6 +237,8 @@ impl GeometrySegmenter {
             max_angle: p.coplanar_angle,
             offset_scale: p.offset_scale,
             min_inliers: p.coplanar_inliers,
+            // σ(z) = s·z² over a patch w coarse pixels wide (z·w/fx metres): twice σ / width.
+            normal_noise: 2.0 * noise.inverse_depth_sigma * camera.fx as f32,
         }
         .join(&patches.stats, &self.edges, &segment_of_patch, count);
         let confidence =
