@@ -52,6 +52,25 @@ fn run(frames: usize, noise: bool) -> serde_json::Value {
     )
     .expect("json");
     assert_eq!(metrics, again);
+    // `opengs eval --scores` renders and labels the map again: the run's own end scores.
+    let scored = Command::new(binary("opengs"))
+        .args(["eval", "--scores"])
+        .arg(&out)
+        .output()
+        .expect("eval --scores");
+    assert!(
+        scored.status.success(),
+        "{}",
+        String::from_utf8_lossy(&scored.stderr)
+    );
+    let rescored: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(out.join("metrics.json")).expect("metrics.json"),
+    )
+    .expect("json");
+    for key in ["psnr_db", "ssim", "holes_pct", "miou", "acc", "miou_raw"] {
+        let (a, b) = (metrics[key].as_f64(), rescored[key].as_f64());
+        assert!(a.is_some() && a == b, "{key}: {a:?} vs {b:?}");
+    }
     // The trajectory has one TUM line per frame.
     let traj = std::fs::read_to_string(out.join("trajectory.txt")).expect("trajectory");
     assert_eq!(traj.lines().filter(|l| !l.starts_with('#')).count(), frames);

@@ -98,11 +98,22 @@ fn read_keyframes(path: &Path) -> anyhow::Result<BTreeSet<u64>> {
         .collect()
 }
 
+/// The frame's instance labels where it has depth (0 elsewhere, which is not scored): what
+/// the sensor never measured the map cannot know (Kinect-like depth ends at 4 m), and render
+/// quality is scored on valid depth only too.
 fn truth_of(frame: &RgbdFrame) -> Option<Vec<u32>> {
-    frame
-        .labels
-        .as_ref()
-        .map(|l| l.iter().map(|&v| u32::from(v)).collect())
+    let labels = frame.labels.as_ref()?;
+    let measured = frame.depth.len() == labels.len();
+    Some(
+        labels
+            .iter()
+            .enumerate()
+            .map(|(i, &v)| match measured && frame.depth[i] == 0 {
+                true => 0,
+                false => u32::from(v),
+            })
+            .collect(),
+    )
 }
 
 /// Renders labels at one held-out pose (not a keyframe) in every `every_n` of trajectory.txt.
@@ -213,4 +224,36 @@ fn write_label_pair_png(
     });
     img.save(path)
         .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn truth_is_scored_only_where_the_frame_has_depth() {
+        let frame = RgbdFrame {
+            index: 0,
+            timestamp: 0.0,
+            width: 2,
+            height: 2,
+            rgb: vec![0; 12],
+            depth: vec![5000, 0, 5000, 0],
+            depth_scale: 5000.0,
+            gt_pose: None,
+            labels: Some(vec![3, 3, 7, 0]),
+        };
+        assert_eq!(truth_of(&frame), Some(vec![3, 0, 7, 0]));
+        // A depth image of another size masks nothing.
+        let odd = RgbdFrame {
+            depth: vec![0; 3],
+            ..frame.clone()
+        };
+        assert_eq!(truth_of(&odd), Some(vec![3, 3, 7, 0]));
+        let unlabelled = RgbdFrame {
+            labels: None,
+            ..frame
+        };
+        assert_eq!(truth_of(&unlabelled), None);
+    }
 }

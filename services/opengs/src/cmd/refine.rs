@@ -195,7 +195,10 @@ pub fn run(args: RefineArgs) -> anyhow::Result<()> {
 }
 
 /// The run's dataset selection: run.json's `dataset_args`, or `--dataset` when given.
-fn dataset_args(run_dir: &Path, dataset_override: Option<&str>) -> anyhow::Result<DatasetArgs> {
+pub(crate) fn dataset_args(
+    run_dir: &Path,
+    dataset_override: Option<&str>,
+) -> anyhow::Result<DatasetArgs> {
     let run = RunDir::new(run_dir);
     let saved = RunRecord::read(&run)?.map(|r| r.dataset_args);
     match (saved, dataset_override) {
