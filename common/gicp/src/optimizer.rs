@@ -28,6 +28,9 @@ pub struct Registration {
     /// Smallest ÷ largest eigenvalue of `H` at the last linearisation: near 0 when some
     /// motion (sliding along a wall, turning about a pole) is barely constrained.
     pub conditioning: f64,
+    /// `H = Σ Jᵀ Ω J` at the last linearisation (rotation rows first, then translation, in
+    /// the target frame: left updates): its weak directions are where a registration slides.
+    pub hessian: Matrix6<f64>,
 }
 
 /// Source points handled by one parallel task.
@@ -145,6 +148,7 @@ pub fn register(
         overlap: last.overlapping as f64 / n,
         error: last.error,
         conditioning,
+        hessian: last.h,
     })
 }
 

@@ -168,6 +168,7 @@ mod tests {
             overlap: fitness,
             error: 1.0,
             conditioning,
+            hessian: opengs_geometry::nalgebra::Matrix6::identity(),
         }
     }
 
