@@ -97,10 +97,15 @@ pub(crate) fn read_u16(path: &Path, width: u32, height: u32) -> Result<Vec<u16>,
     }
 }
 
+/// A failed write names the file and what stopped it (a full disk, a missing folder), not a
+/// decoding problem.
 fn encode_err(path: &Path, e: image::ImageError) -> DatasetError {
-    DatasetError::Image {
-        path: path.to_path_buf(),
-        message: format!("cannot encode: {e}"),
+    match e {
+        image::ImageError::IoError(source) => DatasetError::Io {
+            path: path.to_path_buf(),
+            source,
+        },
+        other => DatasetError::invalid(path, format!("cannot encode image: {other}")),
     }
 }
 
@@ -141,4 +146,22 @@ pub(crate) fn write_rgb_jpeg(
     encoder
         .encode(data, width, height, image::ExtendedColorType::Rgb8)
         .map_err(|e| encode_err(path, e))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_failed_write_names_the_file_and_the_io_error_not_decoding() {
+        let dir = tempfile::tempdir().expect("temp dir");
+        let path = dir.path().join("no_such_folder").join("000083.png");
+        let err = write_u16_png(&path, 2, 1, &[1, 2]).expect_err("no folder");
+        let text = err.to_string();
+        assert!(matches!(err, DatasetError::Io { .. }), "{err:?}");
+        assert!(
+            text.contains("000083.png") && !text.contains("decode"),
+            "{text}"
+        );
+    }
 }
