@@ -632,7 +632,7 @@ impl FrameTracker {
     /// their fitness compares; the verified restart with the best fitness, if it is not the
     /// answer's own. Wide searches on boxy scenes end in minima a few centimetres off
     /// (fr2_desk, scene 1, after its 1.8 s gap: 3.6 cm off at fitness 0.975; two of six
-    /// restarts reach the truth at 0.993).
+    /// camera-axis restarts reached the truth at 0.993).
     fn polish(
         &self,
         frame: &DepthFrame,
