@@ -257,7 +257,8 @@ pub fn segment_quality(
                 let start = Instant::now();
                 let out = segmenter.segment(&input)?;
                 times.push(start.elapsed().as_secs_f64() * 1e3);
-                scores.extend(crate::quality::frame_quality(&out.label_map, truth));
+                let truth = crate::quality::truth_where_measured(truth, input.depth);
+                scores.extend(crate::quality::frame_quality(&out.label_map, &truth));
             }
             times.sort_unstable_by(f64::total_cmp);
             let n = scores.len().max(1) as f64;

@@ -28,6 +28,20 @@ pub struct FrameQuality {
     pub segments: usize,
 }
 
+/// `truth` with 0 (not scored) where `depth` is missing: what the sensor never measured is
+/// scored neither here nor in the map (a Kinect's depth ends at 4 m). Sizes that differ
+/// leave `truth` as it is.
+pub fn truth_where_measured(truth: &[u16], depth: &[u16]) -> Vec<u16> {
+    if truth.len() != depth.len() {
+        return truth.to_vec();
+    }
+    truth
+        .iter()
+        .zip(depth)
+        .map(|(&t, &d)| if d == 0 { 0 } else { t })
+        .collect()
+}
+
 /// Scores `labels` (0 = none) against `truth` (0 = none); `None` when the
 /// frame shows no object or the sizes differ.
 pub fn frame_quality(labels: &[u32], truth: &[u16]) -> Option<FrameQuality> {
@@ -183,6 +197,21 @@ mod tests {
         let w = vec![vec![0.5], vec![0.7], vec![0.0]];
         assert_eq!(max_weight_matching(&w), vec![None, Some(0), None]);
         assert!(max_weight_matching(&[]).is_empty());
+    }
+
+    #[test]
+    fn pixels_without_depth_are_not_scored() {
+        // A wall (1) whose right half lies beyond the sensor's range: no depth, no segment.
+        let truth = [1, 1, 1, 1];
+        let depth = [900, 900, 0, 0];
+        let labels = [5, 5, 0, 0];
+        let all = frame_quality(&labels, &truth).expect("objects");
+        assert!((all.miou - 50.0).abs() < 1e-9, "{all:?}");
+        let measured = truth_where_measured(&truth, &depth);
+        assert_eq!(measured, vec![1, 1, 0, 0]);
+        let q = frame_quality(&labels, &measured).expect("objects");
+        assert!((q.miou - 100.0).abs() < 1e-9, "{q:?}");
+        assert_eq!(truth_where_measured(&truth, &depth[..3]), truth.to_vec());
     }
 
     #[test]
