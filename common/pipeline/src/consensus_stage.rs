@@ -349,6 +349,13 @@ impl ConsensusStage {
             out.relabels.len(),
             out.counter_pruning.len()
         );
+        if tracing::enabled!(tracing::Level::DEBUG) {
+            let table = self.consensus.table();
+            tracing::debug!(
+                "keyframe #{seq}: {}",
+                out.describe(|label| table.confidence(label))
+            );
+        }
         if let Err(e) = self
             .consensus
             .table()

@@ -59,11 +59,79 @@ pub struct ConsensusOutput {
 }
 
 impl ConsensusOutput {
+    /// One line for a debug log: each input label's C_s, relation and target (with the target's
+    /// map confidence from `confidence_of`), then the relabels, so a label's history can be
+    /// followed keyframe by keyframe.
+    pub fn describe(&self, confidence_of: impl Fn(u32) -> f32) -> String {
+        let label = |t: u32| format!("{t} (C {:.2})", confidence_of(t));
+        let mut parts: Vec<String> = self
+            .assignments
+            .iter()
+            .map(|a| {
+                let target = match &a.target {
+                    LabelTarget::Label(t) => label(*t),
+                    LabelTarget::Background => "0".to_string(),
+                    LabelTarget::RenderedParts(p) => {
+                        let p: Vec<String> = p.iter().map(|&t| label(t)).collect();
+                        format!("its parts {}", p.join(", "))
+                    }
+                };
+                format!(
+                    "{} (C_s {:.2}) {:?} → {target}",
+                    a.input_label, a.confidence, a.relation
+                )
+            })
+            .collect();
+        parts.extend(
+            self.relabels
+                .iter()
+                .map(|r| format!("relabel {} → {} ({} px)", r.from, r.to, r.pixels.len())),
+        );
+        parts.join("; ")
+    }
+
     /// Target of input label `input_label`, if it was present.
     pub fn target_of(&self, input_label: u32) -> Option<&LabelTarget> {
         self.assignments
             .binary_search_by_key(&input_label, |a| a.input_label)
             .ok()
             .map(|i| &self.assignments[i].target)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn describe_names_each_decision_and_relabel_with_confidences() {
+        let out = ConsensusOutput {
+            assignments: vec![
+                LabelAssignment {
+                    input_label: 3,
+                    relation: Relation::Whole,
+                    target: LabelTarget::RenderedParts(vec![4, 9]),
+                    confidence: 0.41,
+                },
+                LabelAssignment {
+                    input_label: 5,
+                    relation: Relation::New,
+                    target: LabelTarget::Label(12),
+                    confidence: 1.0,
+                },
+            ],
+            relabels: vec![RelabelInstruction {
+                from: 4,
+                to: 9,
+                pixels: vec![1, 2, 3],
+            }],
+            ..ConsensusOutput::default()
+        };
+        let confidence = |label: u32| if label == 12 { 1.0 } else { 0.53 };
+        assert_eq!(
+            out.describe(confidence),
+            "3 (C_s 0.41) Whole → its parts 4 (C 0.53), 9 (C 0.53); \
+             5 (C_s 1.00) New → 12 (C 1.00); relabel 4 → 9 (3 px)"
+        );
     }
 }
