@@ -101,10 +101,12 @@ impl Files {
                 .map_err(|error| TrajectoryError::Io { path, error })?;
             self.groundtruth = Some(file);
         }
+        // The trajectory last: a process killed between two writes leaves no pose on disk
+        // without its ground truth (`opengs eval` of such a directory found 0 poses to score).
         let targets = [
-            (Some(&mut self.trajectory), trajectory, run.trajectory()),
             (self.groundtruth.as_mut(), groundtruth, run.groundtruth()),
             (Some(&mut self.lost), lost, run.lost()),
+            (Some(&mut self.trajectory), trajectory, run.trajectory()),
         ];
         for (file, text, path) in targets {
             let Some(file) = file else { continue };
