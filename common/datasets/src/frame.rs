@@ -30,6 +30,23 @@ impl RgbdFrame {
         (d != 0).then(|| d as f32 / self.depth_scale)
     }
 
+    /// Instance labels where the frame has depth, 0 (not scored) elsewhere: what the sensor
+    /// never measured (Kinect-like depth ends at 4 m) no segmenter or map can know; render
+    /// quality is scored on valid depth only too. A depth image of another size masks nothing.
+    pub fn labels_where_measured(&self) -> Option<Vec<u16>> {
+        let labels = self.labels.as_ref()?;
+        if self.depth.len() != labels.len() {
+            return Some(labels.clone());
+        }
+        Some(
+            labels
+                .iter()
+                .zip(&self.depth)
+                .map(|(&l, &d)| if d == 0 { 0 } else { l })
+                .collect(),
+        )
+    }
+
     /// Depth in metres, 0 where missing.
     pub fn depth_metres(&self) -> Vec<f32> {
         let k = 1.0 / self.depth_scale;

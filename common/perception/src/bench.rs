@@ -253,11 +253,12 @@ pub fn segment_quality(
             let mut scores = Vec::new();
             for frame in &bench.frames {
                 let input = SegmenterInput::from_frame(frame, bench.intrinsics, &bench.classes);
-                let truth = input.gt_labels.ok_or(PerceptionError::MissingLabels)?;
+                let truth = frame
+                    .labels_where_measured()
+                    .ok_or(PerceptionError::MissingLabels)?;
                 let start = Instant::now();
                 let out = segmenter.segment(&input)?;
                 times.push(start.elapsed().as_secs_f64() * 1e3);
-                let truth = crate::quality::truth_where_measured(truth, input.depth);
                 scores.extend(crate::quality::frame_quality(&out.label_map, &truth));
             }
             times.sort_unstable_by(f64::total_cmp);

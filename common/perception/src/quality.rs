@@ -28,20 +28,6 @@ pub struct FrameQuality {
     pub segments: usize,
 }
 
-/// `truth` with 0 (not scored) where `depth` is missing: what the sensor never measured is
-/// scored neither here nor in the map (a Kinect's depth ends at 4 m). Sizes that differ
-/// leave `truth` as it is.
-pub fn truth_where_measured(truth: &[u16], depth: &[u16]) -> Vec<u16> {
-    if truth.len() != depth.len() {
-        return truth.to_vec();
-    }
-    truth
-        .iter()
-        .zip(depth)
-        .map(|(&t, &d)| if d == 0 { 0 } else { t })
-        .collect()
-}
-
 /// Scores `labels` (0 = none) against `truth` (0 = none); `None` when the
 /// frame shows no object or the sizes differ.
 pub fn frame_quality(labels: &[u32], truth: &[u16]) -> Option<FrameQuality> {
@@ -207,11 +193,26 @@ mod tests {
         let labels = [5, 5, 0, 0];
         let all = frame_quality(&labels, &truth).expect("objects");
         assert!((all.miou - 50.0).abs() < 1e-9, "{all:?}");
-        let measured = truth_where_measured(&truth, &depth);
+        let frame = opengs_datasets::RgbdFrame {
+            index: 0,
+            timestamp: 0.0,
+            width: 4,
+            height: 1,
+            rgb: vec![0; 12],
+            depth: depth.to_vec(),
+            depth_scale: 1000.0,
+            gt_pose: None,
+            labels: Some(truth.to_vec()),
+        };
+        let measured = frame.labels_where_measured().expect("labels");
         assert_eq!(measured, vec![1, 1, 0, 0]);
         let q = frame_quality(&labels, &measured).expect("objects");
         assert!((q.miou - 100.0).abs() < 1e-9, "{q:?}");
-        assert_eq!(truth_where_measured(&truth, &depth[..3]), truth.to_vec());
+        let odd = opengs_datasets::RgbdFrame {
+            depth: depth[..3].to_vec(),
+            ..frame
+        };
+        assert_eq!(odd.labels_where_measured(), Some(truth.to_vec()));
     }
 
     #[test]

@@ -98,20 +98,13 @@ fn read_keyframes(path: &Path) -> anyhow::Result<BTreeSet<u64>> {
         .collect()
 }
 
-/// The frame's instance labels where it has depth (0 elsewhere, which is not scored): what
-/// the sensor never measured the map cannot know (Kinect-like depth ends at 4 m), and render
-/// quality is scored on valid depth only too.
+/// The frame's instance labels where it has depth ([`RgbdFrame::labels_where_measured`]).
 fn truth_of(frame: &RgbdFrame) -> Option<Vec<u32>> {
-    let labels = frame.labels.as_ref()?;
-    let measured = frame.depth.len() == labels.len();
     Some(
-        labels
-            .iter()
-            .enumerate()
-            .map(|(i, &v)| match measured && frame.depth[i] == 0 {
-                true => 0,
-                false => u32::from(v),
-            })
+        frame
+            .labels_where_measured()?
+            .into_iter()
+            .map(u32::from)
             .collect(),
     )
 }
