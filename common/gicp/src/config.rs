@@ -34,6 +34,9 @@ pub struct RegistrationConfig {
     pub lm_max_inner_iterations: usize,
     /// `H` whose smallest/largest eigenvalue ratio is below this is rank-deficient.
     pub degeneracy_ratio: f64,
+    /// Turn the source about its own origin only (the camera centre stays): for a start
+    /// whose translation is good and whose rotation is not.
+    pub rotation_only: bool,
 }
 
 impl Default for RegistrationConfig {
@@ -57,6 +60,7 @@ impl RegistrationConfig {
             lm_lambda_factor: 10.0,
             lm_max_inner_iterations: 10,
             degeneracy_ratio: 1e-10,
+            rotation_only: false,
         }
     }
 

@@ -2,7 +2,7 @@ use crate::cloud::check_registrable;
 use crate::factor;
 use crate::lie::left_update;
 use crate::{Cloud, GicpError, RegistrationConfig, Solver, Target};
-use nalgebra::{Isometry3, Matrix6, SymmetricEigen, Vector6};
+use nalgebra::{Isometry3, Matrix3, Matrix6, Matrix6x3, SymmetricEigen, UnitQuaternion, Vector6};
 use rayon::prelude::*;
 
 /// Outcome of one registration. Statistics come from the final
@@ -98,6 +98,11 @@ pub fn register(
         iterations += 1;
         check_rank(&last.h, config)?;
         let delta = match config.solver {
+            Solver::GaussNewton if config.rotation_only => {
+                let (next, delta) = rotation_step(&transform, &last.h, &last.b)?;
+                transform = next;
+                delta
+            }
             Solver::GaussNewton => {
                 let delta = solve(&last.h, &last.b)?;
                 transform = left_update(&transform, &delta);
@@ -265,8 +270,13 @@ fn lm_step(
 ) -> Result<Option<Step>, GicpError> {
     for _ in 0..config.lm_max_inner_iterations {
         let damped = at.h + Matrix6::identity() * *lambda;
-        let delta = solve(&damped, &at.b)?;
-        let candidate = left_update(transform, &delta);
+        let (candidate, delta) = match config.rotation_only {
+            true => rotation_step(transform, &damped, &at.b)?,
+            false => {
+                let delta = solve(&damped, &at.b)?;
+                (left_update(transform, &delta), delta)
+            }
+        };
         if fixed_correspondence_error(source, target, &candidate, matches) <= at.error {
             *lambda /= config.lm_lambda_factor;
             return Ok(Some(Step {
@@ -300,6 +310,36 @@ fn check_rank(h: &Matrix6<f64>, config: &RegistrationConfig) -> Result<(), GicpE
         )));
     }
     Ok(())
+}
+
+/// A Gauss-Newton step that turns the source about its origin `t` (the camera centre)
+/// and keeps `t`. To first order a left update `(ω, v)` keeps `t` when `v = t × ω`,
+/// so `δ = G ω` with `G = [I; [t]×]`, and `ω` solves `(Gᵀ H G) ω = −Gᵀ b`.
+/// Returns the new transform and `(ω, 0)` (for the convergence test: `t` does not move).
+fn rotation_step(
+    transform: &Isometry3<f64>,
+    h: &Matrix6<f64>,
+    b: &Vector6<f64>,
+) -> Result<(Isometry3<f64>, Vector6<f64>), GicpError> {
+    let t = transform.translation.vector;
+    let mut g = Matrix6x3::zeros();
+    g.fixed_view_mut::<3, 3>(0, 0)
+        .copy_from(&Matrix3::identity());
+    g.fixed_view_mut::<3, 3>(3, 0).copy_from(&t.cross_matrix());
+    let a = g.transpose() * h * g;
+    let omega = a
+        .cholesky()
+        .map(|c| -c.solve(&(g.transpose() * b)))
+        .filter(|w| w.iter().all(|v| v.is_finite()))
+        .ok_or_else(|| GicpError::Degenerate("the rotation block of H is singular".into()))?;
+    let turned = Isometry3::from_parts(
+        transform.translation,
+        UnitQuaternion::from_scaled_axis(omega) * transform.rotation,
+    );
+    Ok((
+        turned,
+        Vector6::new(omega.x, omega.y, omega.z, 0.0, 0.0, 0.0),
+    ))
 }
 
 /// `δ = −H⁻¹ b` by Cholesky (H is symmetric positive definite here).
