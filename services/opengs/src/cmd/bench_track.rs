@@ -19,7 +19,8 @@ pub struct BenchTrackArgs {
     /// Threads of the tracker's pool (the tracker stage runs one).
     #[arg(long, default_value_t = 1, value_parser = opengs_pipeline::cli_values::at_least_one)]
     threads: usize,
-    /// Print every frame slower than this (ms).
+    /// Print every frame slower than this (ms), with its status, why the wide search ran
+    /// and why a frame got no pose (0: every frame).
     #[arg(long, default_value_t = 50.0)]
     slow_ms: f64,
 }
@@ -76,12 +77,15 @@ pub fn run(args: BenchTrackArgs) -> anyhow::Result<()> {
         let ms = us as f64 / 1e3;
         if ms > args.slow_ms {
             println!(
-                "  frame {i:5} ({:.3} s): {ms:6.1} ms  {:?}{}",
+                "  frame {i:5} ({:.3} s): {ms:6.1} ms  {:?}{}{}",
                 f.timestamp,
                 out.status,
                 out.wide_search
                     .as_deref()
-                    .map_or(String::new(), |w| format!(", wide search: {w}"))
+                    .map_or(String::new(), |w| format!(", wide search: {w}")),
+                out.failure
+                    .as_deref()
+                    .map_or(String::new(), |why| format!(": {why}"))
             );
         }
         if out.status.has_pose() {
