@@ -188,7 +188,7 @@ enum Attempt {
     /// The fine registration from the prediction (most frames).
     Fast,
     /// A turn about the camera centre, then the fine registration, from the prediction:
-    /// when the fast answer is not trusted.
+    /// when the fast answer failed or slid more than `fast_path_offset` from the prediction.
     Turned,
     /// Coarse-to-fine, after a gap or a failed fast attempt.
     Wide,
