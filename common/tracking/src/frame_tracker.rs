@@ -478,7 +478,7 @@ impl FrameTracker {
         };
         // After a gap the wide search from the prediction also covers the fine search's
         // basin (fr2_desk with noise, scenes 1 and 3, the same three gap frames: 46–116 ms
-        // with a fine attempt first, 42–64 ms without; position error within 0.01 cm).
+        // with a fine attempt first, 42–64 ms without; position error within 0.02 cm).
         let mut tries = match gap {
             true => vec![],
             false => vec![(predicted, Attempt::Fast), (predicted, Attempt::Turned)],
