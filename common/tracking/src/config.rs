@@ -38,6 +38,12 @@ pub struct TrackerConfig {
     /// takes the wide search too (fr2_desk, scene 1: 90 % land within 7 mm clean and 14 mm
     /// with noise; a slide into the neighbouring minimum moved 4 cm).
     pub fast_path_offset: f64,
+    /// … or, the fine attempt, turned farther than this (rad) from it (on fr2_desk's truth
+    /// with the velocity over 0.1 s, right answers turn up to 3.3° from the prediction).
+    pub fast_path_turn: f64,
+    /// A fine answer farther than this (m) from the prediction, though within
+    /// `fast_path_offset`, is compared with the turned one; the better fitness wins.
+    pub fast_path_sure: f64,
     /// Fine iterations from the prediction (fr2_desk with noise, scenes 1, 3, 5: 1194 of
     /// 1197 converged within 29; the 3 others slid on to the cap of 64, 90 ms each, far
     /// from the prediction).
@@ -94,6 +100,8 @@ impl TrackerConfig {
             restart_source_voxel: 0.1,
             turned: CoarseToFine::turn_first(),
             fast_path_offset: 0.025,
+            fast_path_turn: 4f64.to_radians(),
+            fast_path_sure: 0.015,
             fast_iterations: 30,
             verify: VerifyConfig::default(),
             relocalise: RelocaliseConfig::default(),
