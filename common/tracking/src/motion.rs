@@ -4,7 +4,7 @@ use opengs_geometry::nalgebra::{Matrix3, Translation3, UnitQuaternion, Vector3};
 use opengs_geometry::Pose;
 
 /// Gaps longer than this (s) are not extrapolated: the camera may have done anything.
-const MAX_EXTRAPOLATION_S: f64 = 0.5;
+pub const MAX_EXTRAPOLATION_S: f64 = 0.5;
 
 /// Constant-velocity motion model over time: the next pose repeats the verified
 /// motion of the last [`VELOCITY_BASELINE_S`], scaled to the time since (so a frame
