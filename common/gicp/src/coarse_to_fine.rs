@@ -284,6 +284,43 @@ mod tests {
     }
 
     #[test]
+    fn a_leashed_registration_stops_once_it_strays_from_its_start() {
+        let (source, target, truth) = jump(2.0, 1.0);
+        let free = RegistrationConfig::tum();
+        let start = Isometry3::identity();
+        let r = register(&source, target.fine(), &start, &free).expect("registers");
+        let (cm, _) = error_cm_deg(&r, &truth);
+        assert!(r.converged && cm < 0.2, "{cm:.2} cm");
+        // A leash far wider than the way to the truth changes nothing.
+        let wide = RegistrationConfig {
+            leash_metres: 0.1,
+            leash_radians: 0.2,
+            ..free.clone()
+        };
+        assert_eq!(
+            register(&source, target.fine(), &start, &wide).ok(),
+            Some(r.clone())
+        );
+        // 1 cm: it stops at the first step beyond, unconverged, after fewer iterations.
+        let short = RegistrationConfig {
+            leash_metres: 0.01,
+            ..free.clone()
+        };
+        let stopped = register(&source, target.fine(), &start, &short).expect("registers");
+        let moved = stopped.transform.translation.vector.norm();
+        assert!(moved > 0.01, "{moved}");
+        assert!(!stopped.converged && stopped.iterations < r.iterations);
+        // So does a leash on the turn (0.3°).
+        let turn = RegistrationConfig {
+            leash_radians: 0.3f64.to_radians(),
+            ..free
+        };
+        let stopped = register(&source, target.fine(), &start, &turn).expect("registers");
+        assert!(stopped.transform.rotation.angle() > 0.3f64.to_radians());
+        assert!(!stopped.converged && stopped.iterations < r.iterations);
+    }
+
+    #[test]
     fn fine_only_schedule_is_plain_registration() {
         let (source, target, _) = jump(1.0, 0.5);
         let fine = RegistrationConfig::tum();

@@ -37,6 +37,10 @@ pub struct RegistrationConfig {
     /// Turn the source about its own origin only (the camera centre stays): for a start
     /// whose translation is good and whose rotation is not.
     pub rotation_only: bool,
+    /// Stop once the estimate has moved farther than this from the start (m, rad; ∞:
+    /// never): a caller that rejects such answers anyway need not wait for them to settle.
+    pub leash_metres: f64,
+    pub leash_radians: f64,
 }
 
 impl Default for RegistrationConfig {
@@ -61,6 +65,8 @@ impl RegistrationConfig {
             lm_max_inner_iterations: 10,
             degeneracy_ratio: 1e-10,
             rotation_only: false,
+            leash_metres: f64::INFINITY,
+            leash_radians: f64::INFINITY,
         }
     }
 

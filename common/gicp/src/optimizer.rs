@@ -136,6 +136,13 @@ pub fn register(
             converged = true;
             break;
         }
+        let travel = initial.inverse() * transform;
+        if travel.translation.vector.norm() > config.leash_metres
+            || travel.rotation.angle() > config.leash_radians
+        {
+            // Off the leash: the statistics stay those of the last linearisation.
+            break;
+        }
         last = linearize(source, target, &transform, config, &mut matches)?;
     }
     if !transform.to_homogeneous().iter().all(|v| v.is_finite()) {
