@@ -297,11 +297,13 @@ mod tests {
             leash_radians: 0.2,
             ..free.clone()
         };
-        assert_eq!(
-            register(&source, target.fine(), &start, &wide).ok(),
-            Some(r.clone())
-        );
-        // 1 cm: it stops at the first step beyond, unconverged, after fewer iterations.
+        let same = register(&source, target.fine(), &start, &wide).expect("registers");
+        // (The parallel sums may differ in the last bits.)
+        let apart = (same.transform.inverse() * r.transform)
+            .translation
+            .vector
+            .norm();
+        assert!(apart < 1e-9 && same.iterations == r.iterations && same.converged); // 1 cm: it stops at the first step beyond, unconverged, after fewer iterations.
         let short = RegistrationConfig {
             leash_metres: 0.01,
             ..free.clone()
