@@ -303,7 +303,8 @@ mod tests {
             .translation
             .vector
             .norm();
-        assert!(apart < 1e-9 && same.iterations == r.iterations && same.converged); // 1 cm: it stops at the first step beyond, unconverged, after fewer iterations.
+        assert!(apart < 1e-9 && same.iterations == r.iterations && same.converged);
+        // 1 cm: it stops at the first step beyond, unconverged, after fewer iterations.
         let short = RegistrationConfig {
             leash_metres: 0.01,
             ..free.clone()
