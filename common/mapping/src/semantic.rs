@@ -33,6 +33,12 @@ const MIN_SILHOUETTE: f32 = 0.01;
 /// have opacity 0.1; one mostly hidden behind a surface stays below).
 const MIN_LABEL_WEIGHT: f32 = 0.05;
 
+/// Below this summed weight α·T of labelled Gaussians a pixel of the consensus's render is
+/// 0, unmapped (docs/METHOD.md §5.5): a label voted from the faint edge of an object over
+/// space the map lacks (beyond the depth range), or from behind unlabelled Gaussians, is not
+/// the map's claim about that pixel. 0.5 is where `holes_pct` calls a pixel uncovered.
+pub const MIN_LABELLED_COVER: f32 = 0.5;
+
 /// Visible and total Gaussians of one label in a keyframe render (completeness, §5.2).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct LabelVisibility {
@@ -154,14 +160,15 @@ impl SemanticLoop {
         let r = &mut self.buffers;
         render_into(map, camera, &RenderRequest::semantic(k), r);
         let out = &mut r.output;
-        let label_map = out.labels.take().unwrap_or_default();
+        let mut label_map = out.labels.take().unwrap_or_default();
+        let top_k = out.top_k.take().unwrap_or_default();
+        abstain_where_labels_are_thin(&mut label_map, &top_k, &map.labels);
         let surface_depth = out
             .depth
             .iter()
             .zip(&out.silhouette)
             .map(|(&d, &s)| if s > MIN_SILHOUETTE { d / s } else { 0.0 })
             .collect();
-        let top_k = out.top_k.take().unwrap_or_default();
         let visible = out.visible_per_label.take().unwrap_or_default();
         let visibility = label_visibility(&map.count_per_label(), &visible);
         self.pending.push(KeyframeRender {
@@ -249,6 +256,17 @@ impl SemanticLoop {
             labelled,
             pruned: counters.len(),
         })
+    }
+}
+
+/// Pixels whose labelled Gaussians weigh less than [`MIN_LABELLED_COVER`] render 0 (see the
+/// constant); `labels` is the map's label per Gaussian.
+fn abstain_where_labels_are_thin(label_map: &mut [u32], top_k: &TopK, labels: &[u32]) {
+    let cover = top_k.weight_where(|id| labels.get(id as usize).is_some_and(|&l| l != 0));
+    for (l, c) in label_map.iter_mut().zip(cover) {
+        if c < MIN_LABELLED_COVER {
+            *l = 0;
+        }
     }
 }
 

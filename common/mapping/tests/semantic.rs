@@ -204,3 +204,38 @@ fn the_next_keyframe_render_reuses_the_buffers_and_sees_the_relabel() {
     assert_eq!(done.relabelled, 1);
     assert_eq!(&m.map().labels, &[8, 9, 0, 0]);
 }
+
+/// A label voted from a faint edge or from behind unlabelled Gaussians is not the map's claim:
+/// those pixels render 0 for the consensus (`MIN_LABELLED_COVER`).
+#[test]
+fn pixels_where_labelled_gaussians_weigh_under_half_render_unmapped() {
+    let mut map = GaussianMap::new();
+    // G0: label 5 at pixel (22, 32), 0.05 m at 2 m: σ ≈ 64·0.05/2 = 1.6 px.
+    map.push(gaussian(-0.3125, 0.0, 2.0, 0.05, 5));
+    // G1: unlabelled, opacity 0.95, at pixel (42, 42), 2 m in front of G2 (label 7, 0.4 m at
+    // 4 m: σ ≈ 6.4 px).
+    map.push(Gaussian::from_values(
+        [0.3125, 0.3125, 2.0],
+        [1.0, 0.0, 0.0, 0.0],
+        [0.05; 3],
+        0.95,
+        [0.5; 3],
+        0,
+    ));
+    map.push(gaussian(0.625, 0.625, 4.0, 0.4, 7));
+    let mut m = Mapper::with_map(MapperConfig::default(), map);
+    let r = m.render_for_consensus(7, &camera(), 50);
+    // G0's centre: α ≈ 0.99.
+    assert_eq!(r.label_map[px(22, 32) as usize], 5);
+    // 4 px from G0's centre only its tail reaches: α ≈ 0.99·exp(−0.5·16/1.6²) ≈ 0.04.
+    let tail = r.top_k.weight_of(px(26, 32) as usize, 0).unwrap_or(0.0);
+    assert!(tail > 0.01 && tail < 0.1, "tail weight {tail}");
+    assert_eq!(r.label_map[px(26, 32) as usize], 0);
+    // Behind G1, G2 weighs about (1 − 0.95)·0.99 ≈ 0.05; label 0 never wins a vote, so
+    // without the rule the pixel would be 7.
+    let behind = r.top_k.weight_of(px(42, 42) as usize, 2).unwrap_or(0.0);
+    assert!(behind > 0.03 && behind < 0.07, "weight behind {behind}");
+    assert_eq!(r.label_map[px(42, 42) as usize], 0);
+    // 6 px away G1 is gone and G2 weighs 0.99·exp(−0.5·36/6.4²) ≈ 0.64: label 7.
+    assert_eq!(r.label_map[px(48, 42) as usize], 7);
+}

@@ -1,5 +1,8 @@
 //! Mapping loss (docs/METHOD.md §8): `w_l1·L1(C) + w_ssim·(1 − SSIM(C)) + w_depth·L1(D)`, with
 //! pixels of invalid (0) target depth left out of the depth term; value and dL/dC, dL/dD.
+//! By default the colour of a pixel without target depth is held fixed (no dL/dC there): such
+//! a pixel says nothing about where a surface is, and its colour would stretch the nearest
+//! Gaussians over it (a far wall beyond the sensor's range painted by the objects before it).
 
 use rayon::prelude::*;
 
@@ -13,6 +16,9 @@ pub struct LossWeights {
     pub l1: f32,
     pub ssim: f32,
     pub depth: f32,
+    /// dL/dC is 0 at pixels whose target depth is invalid: the gradient of the loss with the
+    /// render's colour there held fixed (the value is the whole image's). Not in the paper.
+    pub colour_needs_depth: bool,
 }
 
 impl Default for LossWeights {
@@ -21,6 +27,16 @@ impl Default for LossWeights {
             l1: 0.8,
             ssim: 0.2,
             depth: 0.1,
+            colour_needs_depth: true,
+        }
+    }
+}
+
+/// Zeroes dL/dC where the target depth is invalid (`LossWeights::colour_needs_depth`).
+pub(crate) fn hold_colour_without_depth(dl_dcolor: &mut [[f32; 3]], target_depth: &[f32]) {
+    for (g, &t) in dl_dcolor.iter_mut().zip(target_depth) {
+        if t <= 0.0 {
+            *g = [0.0; 3];
         }
     }
 }
@@ -110,8 +126,12 @@ impl Loss {
             .zip(self.bands.par_iter_mut())
             .enumerate()
             .map(|(b, ((gc, gd), scratch))| {
-                let r0 = b * rows;
-                band(simd, &inputs, r0, (r0 + rows).min(hd), gc, gd, scratch)
+                let (r0, r1) = (b * rows, ((b + 1) * rows).min(hd));
+                let sums = band(simd, &inputs, r0, r1, gc, gd, scratch);
+                if w.colour_needs_depth {
+                    hold_colour_without_depth(gc, &target.depth[r0 * wd..r1 * wd]);
+                }
+                sums
             })
             .reduce(BandSums::default, BandSums::add);
 
@@ -157,7 +177,11 @@ mod tests {
         let target = TargetFrame::from_rgb_f32(w, h, &rgb, &depth);
         let color: Vec<[f32; 3]> = (0..n).map(|_| [rng.gen(), rng.gen(), rng.gen()]).collect();
         let render_depth: Vec<f32> = (0..n).map(|_| rng.gen_range(1.0..3.0)).collect();
-        let wts = LossWeights::default();
+        // The exact gradient: no colour held at the pixels without depth.
+        let wts = LossWeights {
+            colour_needs_depth: false,
+            ..LossWeights::default()
+        };
         let mut loss = Loss::new();
         let (mut gc, mut gd) = (Vec::new(), Vec::new());
         let v = loss.eval(&color, &render_depth, &target, &wts, &mut gc, &mut gd);

@@ -95,16 +95,41 @@ fn worst<const K: usize>(a: &[[f32; K]], b: &[[f32; K]]) -> f64 {
 }
 
 fn eval_fast(c: &Case, loss: &mut Loss) -> (LossValue, Vec<[f32; 3]>, Vec<f32>) {
+    eval_with(c, loss, &LossWeights::default())
+}
+
+fn eval_with(c: &Case, loss: &mut Loss, w: &LossWeights) -> (LossValue, Vec<[f32; 3]>, Vec<f32>) {
     let (mut gc, mut gd) = (Vec::new(), Vec::new());
-    let v = loss.eval(
-        &c.color,
-        &c.depth,
-        &c.target,
-        &LossWeights::default(),
-        &mut gc,
-        &mut gd,
-    );
+    let v = loss.eval(&c.color, &c.depth, &c.target, w, &mut gc, &mut gd);
     (v, gc, gd)
+}
+
+/// The loss's exact gradient everywhere (colour held nowhere).
+fn exact() -> LossWeights {
+    LossWeights {
+        colour_needs_depth: false,
+        ..LossWeights::default()
+    }
+}
+
+#[test]
+fn colour_without_target_depth_is_held_and_the_rest_is_unchanged() {
+    let c = case(7, 67, 41, 0.3);
+    let (held, gc_held, gd_held) = eval_fast(&c, &mut Loss::new());
+    let (free, gc_free, gd_free) = eval_with(&c, &mut Loss::new(), &exact());
+    assert_eq!(held, free, "the value is the whole image's either way");
+    assert_eq!(gd_held, gd_free);
+    let mut held_pixels = 0;
+    for (p, (h, f)) in gc_held.iter().zip(&gc_free).enumerate() {
+        if c.target.depth[p] > 0.0 {
+            assert_eq!(h, f, "pixel {p} has depth: its gradient is the loss's");
+        } else {
+            assert_eq!(*h, [0.0; 3], "pixel {p} has no depth: its colour is held");
+            held_pixels += usize::from(f.iter().any(|&g| g != 0.0));
+        }
+    }
+    // Every 5th pixel lacks depth; nearly all of them had a colour gradient to hold.
+    assert!(held_pixels > 67 * 41 / 5 - 20, "{held_pixels} held");
 }
 
 #[test]
@@ -115,19 +140,15 @@ fn fused_loss_matches_reference_on_random_images() {
     for level in SimdLevel::available() {
         cap_level(Some(level));
         for (k, &(w, h)) in sizes.iter().enumerate() {
-            for noise in [1.0, 0.02] {
+            for (noise, weights) in [(1.0, LossWeights::default()), (0.02, exact())] {
                 let c = case(10 + k as u64, w, h, noise);
-                let (v, gc, gd) = eval_fast(&c, &mut loss);
+                let (v, gc, gd) = eval_with(&c, &mut loss, &weights);
                 let (mut rc, mut rd) = (Vec::new(), Vec::new());
-                let r = loss_reference(
-                    &c.color,
-                    &c.depth,
-                    &c.target,
-                    &LossWeights::default(),
-                    &mut rc,
-                    &mut rd,
+                let r = loss_reference(&c.color, &c.depth, &c.target, &weights, &mut rc, &mut rd);
+                let what = format!(
+                    "{level:?} {w}x{h} noise {noise} colour held {}",
+                    weights.colour_needs_depth
                 );
-                let what = format!("{level:?} {w}x{h} noise {noise}");
                 assert_close(&v, &r, &what);
                 let gdw: Vec<[f32; 1]> = gd.iter().map(|&v| [v]).collect();
                 let rdw: Vec<[f32; 1]> = rd.iter().map(|&v| [v]).collect();
@@ -245,7 +266,7 @@ fn fused_loss_gradient_matches_f64_finite_differences() {
 fn fd_check(seed: u64, noise: f32, level: SimdLevel) {
     let (w, h) = (23usize, 19usize);
     let c = case(seed, w as u32, h as u32, noise);
-    let (_, gc, gd) = eval_fast(&c, &mut Loss::new());
+    let (_, gc, gd) = eval_with(&c, &mut Loss::new(), &exact());
     let x: Vec<[f64; 3]> = c.color.iter().map(|p| p.map(|v| v as f64)).collect();
     let d: Vec<f64> = c.depth.iter().map(|&v| v as f64).collect();
     let eps = 1e-6;

@@ -162,6 +162,9 @@ pub fn loss_reference(
         }
     }
 
+    if w.colour_needs_depth {
+        crate::loss::hold_colour_without_depth(dl_dcolor, &target.depth);
+    }
     let valid = target.depth.iter().filter(|&&d| d > 0.0).count();
     let mut depth_l1 = 0.0f64;
     if valid > 0 {

@@ -2,6 +2,7 @@
 //! contributions, and the per-tile-row storage of the result.
 
 use half::f16;
+use rayon::prelude::*;
 
 /// Stored weights are the f16 of weight × 2^12: f16 halves the bytes the renderer stores per
 /// contribution (a 640×480 top-K: 16 MB instead of 25; (b) renders 4–5 ms faster per three
@@ -273,6 +274,47 @@ impl TopK {
         t
     }
 
+    /// Per pixel (row-major), the summed weight α·T of every Gaussian the render met there
+    /// (in the K heaviest or not) for which `counts(id)` holds. Walks each tile row's visits
+    /// once, not once per pixel as [`TopK::pixel`] would.
+    pub fn weight_where(&self, counts: impl Fn(u32) -> bool + Sync) -> Vec<f32> {
+        let (w, h) = (self.width as usize, self.height as usize);
+        let mut out = vec![0.0f32; w * h];
+        if w == 0 {
+            return out;
+        }
+        let rows_per_band = self.tiles_x as usize * T as usize;
+        out.par_chunks_mut(T as usize * w)
+            .zip(&self.bands)
+            .enumerate()
+            .for_each(|(b, (rows, band))| {
+                for (r, span) in self.rows[b * rows_per_band..][..rows_per_band]
+                    .iter()
+                    .enumerate()
+                {
+                    let (tx, ly) = (r / T as usize, r % T as usize);
+                    let (s, n) = (span.visits as usize, span.len as usize);
+                    let mut at = span.weights as usize;
+                    for (&id, &lanes) in band.ids[s..s + n].iter().zip(&band.lanes[s..s + n]) {
+                        let mut reached = lanes & REACHED;
+                        if !counts(id) {
+                            at += reached.count_ones() as usize;
+                            continue;
+                        }
+                        while reached != 0 {
+                            let x = tx * T as usize + reached.trailing_zeros() as usize;
+                            reached &= reached - 1;
+                            if let Some(sum) = rows.get_mut(ly * w + x).filter(|_| x < w) {
+                                *sum += load_weight(band.weights[at]);
+                            }
+                            at += 1;
+                        }
+                    }
+                }
+            });
+        out
+    }
+
     /// Renumbers ids after the map was compacted (`old_to_new` as `GaussianMap::remove_where`
     /// gives it); removed Gaussians (and ids past `old_to_new`) drop out of every list.
     pub fn remap(&mut self, old_to_new: &[Option<u32>]) {
@@ -355,6 +397,18 @@ mod tests {
     }
 
     #[test]
+    fn weights_are_summed_over_every_gaussian_met_that_counts() {
+        let t = by_hand();
+        let all = t.weight_where(|_| true);
+        assert_eq!(all.len(), 60);
+        // Gaussian 8's 0.125 at pixel 2 counts though it is not in that pixel's top-K.
+        assert_eq!(all[..4], [0.5625, 0.1875, 0.75, 0.0]);
+        let without_9 = t.weight_where(|id| id != 9);
+        assert_eq!(without_9[..3], [0.5, 0.0, 0.375]);
+        assert!(all[3..].iter().all(|&w| w == 0.0));
+    }
+
+    #[test]
     fn remap_drops_removed_gaussians_and_renumbers() {
         let mut t = by_hand();
         // 7 removed; 9 → 4.
@@ -391,6 +445,16 @@ mod tests {
                     .collect();
                 assert_eq!(got, want, "({x}, {y})");
             }
+        }
+        // Every band and tile (the partial ones too) sums into its own pixels.
+        let odd = t.weight_where(|id| id % 2 == 1);
+        for (p, list) in lists.iter().enumerate() {
+            let want: f32 = list
+                .iter()
+                .filter(|e| e.0 % 2 == 1)
+                .map(|e| stored_weight(e.1))
+                .sum();
+            assert_eq!(odd[p], want, "pixel {p}");
         }
     }
 
