@@ -38,15 +38,19 @@ pub enum Ablation {
     /// Unmapped pixels count in a = I/|ℓs| (§5.5; the paper's table): a segment half over
     /// unmapped space is "other".
     NoUnmappedAbstain,
+    /// No Majority relation (§5.5; not in the paper): a segment that misses the table's
+    /// thresholds is "other" even when it and a map label share over half of each.
+    NoMajorityMatch,
 }
 
 impl Ablation {
-    pub const ALL: [Ablation; 5] = [
+    pub const ALL: [Ablation; 6] = [
         Self::NoCounterPruning,
         Self::NoConfidenceUpdate,
         Self::NoPartDecay,
         Self::NoInsideSplit,
         Self::NoUnmappedAbstain,
+        Self::NoMajorityMatch,
     ];
 
     pub fn as_str(&self) -> &'static str {
@@ -56,6 +60,7 @@ impl Ablation {
             Self::NoPartDecay => "no-part-decay",
             Self::NoInsideSplit => "no-inside-split",
             Self::NoUnmappedAbstain => "no-unmapped-abstain",
+            Self::NoMajorityMatch => "no-majority-match",
         }
     }
 
@@ -66,6 +71,7 @@ impl Ablation {
             Self::NoPartDecay => config.enable_part_decay = false,
             Self::NoInsideSplit => config.enable_inside_split = false,
             Self::NoUnmappedAbstain => config.unmapped_pixels_abstain = false,
+            Self::NoMajorityMatch => config.majority_match = false,
         }
     }
 }

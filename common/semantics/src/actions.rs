@@ -64,6 +64,10 @@ impl Decisions {
         let split_from = Self::decide_partial(e, &mut d);
         Self::allocate_fresh(e, table, &split_from, &mut d);
         Self::decide_whole(e, &mut d);
+        for (&s, &r) in &e.matching.majority {
+            d.targets
+                .insert(s, (Relation::Majority, LabelTarget::Label(r)));
+        }
         for &s in &e.matching.other {
             d.targets
                 .insert(s, (Relation::Other, LabelTarget::Background));

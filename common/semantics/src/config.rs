@@ -35,6 +35,10 @@ pub struct ConsensusConfig {
     /// is New. Off, an object half over unmapped space is "other" and its unlabelled
     /// Gaussians never get a label.
     pub unmapped_pixels_abstain: bool,
+    /// A departure from the paper (§5.5): a segment with no relation of the table whose
+    /// largest partner ℓr has it as its own largest partner, both sharing over half, takes ℓr
+    /// (Majority). Off, it is "other" and its new Gaussians stay unlabelled.
+    pub majority_match: bool,
 }
 
 impl Default for ConsensusConfig {
@@ -51,6 +55,7 @@ impl Default for ConsensusConfig {
             enable_part_decay: true,
             enable_inside_split: true,
             unmapped_pixels_abstain: true,
+            majority_match: true,
         }
     }
 }

@@ -10,7 +10,8 @@
 //!
 //! # Decisions where docs/METHOD.md is open
 //! - Relations only consider non-zero rendered labels; "New" means a < τ3 for all of them.
-//! - Resolution order per input label: Full > Partial > Whole > New > other. A rendered
+//! - Resolution order per input label: Full > Inside > Partial > Whole > New > Majority >
+//!   other (Inside and Majority: docs/METHOD.md §5.5). A rendered
 //!   label already used as a Full or Partial target is not also a Whole part (only possible at
 //!   exact threshold boundaries). With thresholds ≤ 0.5, ties go to the largest I, then the
 //!   smallest id.

@@ -1,5 +1,5 @@
 //! Resolves each input label to exactly one relation (Full > Inside > Partial > Whole > New >
-//! other).
+//! Majority > other).
 
 use std::collections::{BTreeMap, BTreeSet};
 
@@ -20,6 +20,9 @@ pub struct Matching {
     pub whole: BTreeMap<u32, Vec<u32>>,
     /// Input labels over unmapped space.
     pub new: Vec<u32>,
+    /// ℓs → ℓr: no relation of the table, but each is the other's largest partner and covers
+    /// over half of it (a over mapped pixels, and b); departure, docs/METHOD.md §5.5.
+    pub majority: BTreeMap<u32, u32>,
     /// Input labels sent to background.
     pub other: Vec<u32>,
 }
@@ -126,10 +129,35 @@ impl Matching {
                 m.whole.insert(s, parts);
             } else if partners(s).all(|(_, _, a, ..)| a < config.tau_min) {
                 m.new.push(s);
+            } else if let Some(r) = config
+                .majority_match
+                .then(|| majority_partner(overlap, s, mapped_area(s), &claimed))
+                .flatten()
+            {
+                m.majority.insert(s, r);
             } else {
                 m.other.push(s);
             }
         }
         m
     }
+}
+
+/// The unclaimed rendered label ℓr that shares over half of input label `s`'s `mapped` pixels
+/// and over half of its own rendered pixels. Then each is the other's largest partner, so at
+/// most one ℓr qualifies for `s`, and no other input label can claim the same ℓr.
+fn majority_partner(
+    overlap: &Overlap,
+    s: u32,
+    mapped: u32,
+    claimed: &BTreeSet<u32>,
+) -> Option<u32> {
+    overlap
+        .pairs
+        .range((s, 1)..=(s, u32::MAX))
+        .find(|(&(_, r), &i)| {
+            let (_, b) = overlap.ratios(s, r);
+            2 * u64::from(i) > u64::from(mapped) && b > 0.5 && !claimed.contains(&r)
+        })
+        .map(|(&(_, r), _)| r)
 }

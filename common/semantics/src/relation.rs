@@ -26,6 +26,9 @@ pub enum Relation {
     Whole,
     /// a < τ3 for every non-zero ℓr: the segment covers unmapped space.
     New,
+    /// No relation of the table, but ℓs and ℓr are each other's largest partner and share over
+    /// half of both (departure, docs/METHOD.md §5.5): ℓs takes ℓr, nothing else changes.
+    Majority,
     /// Anything else: the segment's pixels become background 0.
     Other,
 }

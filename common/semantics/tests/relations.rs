@@ -27,12 +27,20 @@ fn run_case(case: &Case, config: &ConsensusConfig) -> Relation {
     out.assignments[0].relation
 }
 
+/// Asserts every case's relation under `config`.
+fn check(cases: &[Case], config: &ConsensusConfig) {
+    for case in cases {
+        assert_eq!(run_case(case, config), case.expected, "{}", case.name);
+    }
+}
+
 /// The paper's table: input-only pixels (rendered 0) count in a = I/|ℓs|.
 #[test]
 fn relation_boundaries_on_both_sides() {
     use Relation::*;
     let paper = ConsensusConfig {
         unmapped_pixels_abstain: false,
+        majority_match: false,
         ..ConsensusConfig::default()
     };
     #[rustfmt::skip]
@@ -62,9 +70,7 @@ fn relation_boundaries_on_both_sides() {
         Case { name: "new: a just below τ3", s_only: 361, shared: 39, r_only: 0, expected: New },
         Case { name: "new: no overlap", s_only: 400, shared: 0, r_only: 100, expected: New },
     ];
-    for case in &cases {
-        assert_eq!(run_case(case, &paper), case.expected, "{}", case.name);
-    }
+    check(&cases, &paper);
 }
 
 /// The default: input-only pixels render 0, so they abstain from the a of Full and Inside;
@@ -87,14 +93,56 @@ fn unmapped_pixels_abstain_boundaries() {
         Case { name: "a just below τ2", s_only: 41, shared: 359, r_only: 200, expected: Other },
         Case { name: "new: no overlap", s_only: 400, shared: 0, r_only: 100, expected: New },
     ];
-    for case in &cases {
-        assert_eq!(
-            run_case(case, &ConsensusConfig::default()),
-            case.expected,
-            "{}",
-            case.name
-        );
-    }
+    // The Majority relation (tested below) would take the two "other" cases.
+    let abstain_only = ConsensusConfig {
+        majority_match: false,
+        ..ConsensusConfig::default()
+    };
+    check(&cases, &abstain_only);
+}
+
+/// The default: a segment that misses the table's thresholds takes the map label sharing over
+/// half of its mapped pixels and over half of the label's pixels (Majority, §5.5).
+#[test]
+fn majority_boundaries() {
+    use Relation::*;
+    #[rustfmt::skip]
+    let cases = [
+        // a = 1 over the mapped pixels, b = 340/401: Full misses b ≥ τ1 by one pixel.
+        Case { name: "a = τ1, b below τ1", s_only: 60, shared: 340, r_only: 61, expected: Majority },
+        // a = 359/400 misses Partial's τ2; mapped a = 1, b = 359/559.
+        Case { name: "a just below τ2", s_only: 41, shared: 359, r_only: 200, expected: Majority },
+        // b = 201/400 is over half; 200/400 is not.
+        Case { name: "b just over half", s_only: 100, shared: 201, r_only: 199, expected: Majority },
+        Case { name: "b = half", s_only: 100, shared: 200, r_only: 200, expected: Other },
+    ];
+    check(&cases, &ConsensusConfig::default());
+}
+
+#[test]
+fn a_majority_segment_takes_the_label_and_changes_nothing_else() {
+    // Input 1: rows 0..10, rendered 1 rows 3..16: a = 0.7 (1 over its 7 mapped rows), b = 7/13.
+    let mut scene = Scene::new(20, 20);
+    scene.input_rows(0..10, 1, 0.9);
+    scene.rendered_rows(3..16, 1);
+    let mut consensus = consensus_with(&[0.4], ConsensusConfig::default());
+    let out = scene.run(&mut consensus);
+    assert_eq!(out.assignments[0].relation, Relation::Majority);
+    // All its pixels, mapped or not, take label 1; the rest stays 0.
+    assert!(out.consistent_label_map[..200].iter().all(|&l| l == 1));
+    assert!(out.consistent_label_map[200..].iter().all(|&l| l == 0));
+    assert!(out.relabels.is_empty() && out.counter_pruning.is_empty());
+    // C_r stays: a Majority is no confirmation.
+    assert_eq!(consensus.table().confidence(1), 0.4);
+    let paper = ConsensusConfig {
+        majority_match: false,
+        ..ConsensusConfig::default()
+    };
+    let mut consensus = consensus_with(&[0.4], paper);
+    assert_eq!(
+        scene.run(&mut consensus).assignments[0].relation,
+        Relation::Other
+    );
 }
 
 #[test]

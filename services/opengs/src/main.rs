@@ -21,7 +21,7 @@ struct Cli {
 enum Command {
     /// Run the pipeline on a dataset (default: the embedded synthetic room).
     Run(cmd::run::RunArgs),
-    /// Run the four consensus ablation settings on one dataset and print the table.
+    /// Run the consensus ablation (everything on, then each module off) on one dataset and print the table.
     Ablation(cmd::ablation::AblationArgs),
     /// Talk to a running pipeline: status, stop, swap, scale.
     Ctl(cmd::ctl::CtlArgs),
