@@ -35,9 +35,9 @@ pub struct ConsensusConfig {
     /// is New. Off, an object half over unmapped space is "other" and its unlabelled
     /// Gaussians never get a label.
     pub unmapped_pixels_abstain: bool,
-    /// A departure from the paper (§5.5): a segment with no relation of the table whose
-    /// largest partner ℓr has it as its own largest partner, both sharing over half, takes ℓr
-    /// (Majority). Off, it is "other" and its new Gaussians stay unlabelled.
+    /// A departure from the paper (§5.5): a segment with no relation of the table that shares
+    /// over half of its mapped pixels with a map label ℓr, and over half of ℓr's pixels, takes
+    /// ℓr (Majority). Off, it is "other" and its new Gaussians stay unlabelled.
     pub majority_match: bool,
 }
 

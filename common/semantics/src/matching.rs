@@ -20,8 +20,8 @@ pub struct Matching {
     pub whole: BTreeMap<u32, Vec<u32>>,
     /// Input labels over unmapped space.
     pub new: Vec<u32>,
-    /// ℓs → ℓr: no relation of the table, but each is the other's largest partner and covers
-    /// over half of it (a over mapped pixels, and b); departure, docs/METHOD.md §5.5.
+    /// ℓs → ℓr: no relation of the table, but they share over half of each (a over mapped
+    /// pixels, and b); departure, docs/METHOD.md §5.5.
     pub majority: BTreeMap<u32, u32>,
     /// Input labels sent to background.
     pub other: Vec<u32>,
