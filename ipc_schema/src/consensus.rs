@@ -10,8 +10,9 @@ use crate::{MessageKind, SchemaError, Stamp};
 /// Most label mappings / relabel runs / prune runs in one result.
 pub const MAX_CONSENSUS_ENTRIES: u32 = 1 << 20;
 
-/// A label change over a set of pixels: `from` → `to` for pixels
-/// `pixels[offset .. offset + count]`.
+/// A label change: `from` → `to` for the Gaussians in the top-K of pixels
+/// `pixels[offset .. offset + count]` ([`PixelRun::SCOPE_PIXELS`]), or for every Gaussian
+/// labelled `from` ([`PixelRun::SCOPE_LABEL`]).
 #[derive(Debug, Clone, Copy, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
 #[repr(C)]
 pub struct PixelRun {
@@ -19,6 +20,14 @@ pub struct PixelRun {
     pub to: u32,
     pub offset: u32,
     pub count: u32,
+    pub scope: u32,
+}
+
+impl PixelRun {
+    /// Only the Gaussians met at the run's pixels change.
+    pub const SCOPE_PIXELS: u32 = 0;
+    /// Every Gaussian labelled `from` changes (a label absorbed whole).
+    pub const SCOPE_LABEL: u32 = 1;
 }
 
 /// A counter-pruning region (docs/METHOD.md §5.3): Gaussians labelled `label` (ℓr) in the top-K of
@@ -181,6 +190,13 @@ fn check_runs(parts: &ConsensusResult, n: usize) -> Result<(), SchemaError> {
         if offset as u64 + count as u64 > total {
             return Err(SchemaError::Invalid("pixel run outside the pixel list"));
         }
+    }
+    if parts
+        .relabels
+        .iter()
+        .any(|r| r.scope != PixelRun::SCOPE_PIXELS && r.scope != PixelRun::SCOPE_LABEL)
+    {
+        return Err(SchemaError::Invalid("relabel run with an unknown scope"));
     }
     if parts.pixels.iter().any(|&p| p as usize >= n) {
         return Err(SchemaError::Invalid("pixel index outside the image"));

@@ -320,6 +320,7 @@ fn consensus_round_trip_and_rejects() {
         to: 2,
         offset: 0,
         count: 2,
+        scope: PixelRun::SCOPE_PIXELS,
     }];
     let prunes = [PruneRun {
         label: 1,
@@ -350,12 +351,33 @@ fn consensus_round_trip_and_rejects() {
         to: 2,
         offset: 2,
         count: 5,
+        scope: PixelRun::SCOPE_PIXELS,
     }];
     let bad = ConsensusResult {
         relabels: &bad_runs,
         ..parts
     };
     assert!(hdr.encode(&bad, as_uninit_mut(payload)).is_err());
+    // A relabel scope that is neither pixels nor label: refused on encode and on decode.
+    let bad_scope = [PixelRun {
+        scope: 2,
+        ..relabels[0]
+    }];
+    let bad = ConsensusResult {
+        relabels: &bad_scope,
+        ..parts
+    };
+    assert!(hdr.encode(&bad, as_uninit_mut(payload)).is_err());
+    hdr.encode(&parts, as_uninit_mut(payload)).expect("encode");
+    // label map 6·4 + mapping 2·8 bytes, then the run's from, to, offset, count, scope.
+    payload[56..60].copy_from_slice(&2u32.to_ne_bytes());
+    assert!(matches!(hdr.decode(payload), Err(SchemaError::Invalid(_))));
+    payload[56..60].copy_from_slice(&PixelRun::SCOPE_LABEL.to_ne_bytes());
+    assert_eq!(
+        hdr.decode(payload).expect("decode").result.relabels[0].scope,
+        1
+    );
+    hdr.encode(&parts, as_uninit_mut(payload)).expect("encode");
     let bad_pixels = [2u32, 3, 6];
     let bad = ConsensusResult {
         label_map: &label_map,
@@ -487,6 +509,7 @@ fn consensus_with_many_runs_fills_its_payload() {
                 to: 2,
                 offset: i as u32,
                 count: 1,
+                scope: PixelRun::SCOPE_PIXELS,
             })
             .collect();
         let prunes: Vec<PruneRun> = (0..p)

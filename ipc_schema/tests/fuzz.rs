@@ -814,7 +814,7 @@ impl Target for Consensus {
         fits(
             sec(pixels(h.width, h.height), 4)
                 + sec(h.mapping_count as u128, 8)
-                + sec(h.relabel_count as u128, 16)
+                + sec(h.relabel_count as u128, 20)
                 + sec(h.prune_count as u128, 12)
                 + sec(h.pixel_count as u128, 4),
         )
@@ -839,6 +839,7 @@ impl Target for Consensus {
                     to: rng.gen(),
                     offset,
                     count,
+                    scope: rng.gen_range(0..=1),
                 }
             })
             .collect();
@@ -910,6 +911,7 @@ impl Target for Consensus {
             assert!(run.iter().all(|&px| (px as usize) < n));
         }
         assert!(r.pixels.iter().all(|&px| (px as usize) < n));
+        assert!(r.relabels.iter().all(|x| x.scope <= PixelRun::SCOPE_LABEL));
         let mut s = Sections::new(p);
         s.next(r.label_map);
         s.next(r.mapping);

@@ -15,6 +15,7 @@
 mod config;
 mod densify;
 mod final_optimisation;
+mod fragment;
 mod keyframe;
 mod mapper;
 mod refine;
@@ -25,6 +26,9 @@ mod splitting;
 pub use config::MapperConfig;
 pub use densify::{gaussians_for_holes, gaussians_from_points, DensifyInput, HoleFilling};
 pub use final_optimisation::{fill_holes, optimise_final, KeptKeyframes};
+pub use fragment::{
+    lies_on_host, median_offset_from_host, FRAGMENT_MAX_OFFSET_M, FRAGMENT_NEIGHBOURS,
+};
 pub use keyframe::StoredKeyframe;
 pub use mapper::{Mapper, TrackableGaussians};
 pub use refine::{refine, target_frame, RefineConfig, RefineError, RefineStats};

@@ -17,9 +17,11 @@ use std::collections::{BTreeMap, VecDeque};
 
 use opengs_semantics::{
     apply_relabels, select_counter_gaussians, validate_regions, CounterPruneRegion,
-    RelabelInstruction,
+    RelabelInstruction, RelabelScope,
 };
 use opengs_splat::{render_into, Adam, Camera, GaussianMap, RenderRequest, Rendered, TopK};
+
+use crate::fragment::lies_on_host;
 
 /// Renders kept at most while their consensus is outstanding (the segmenter works on the
 /// newest keyframe only, so more would be stale).
@@ -74,7 +76,7 @@ pub struct ConsensusUpdate<'a> {
 }
 
 /// What applying one consensus result did.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
 pub struct ConsensusApplied {
     /// Label writes through G_topK.
     pub relabelled: usize,
@@ -82,6 +84,8 @@ pub struct ConsensusApplied {
     pub labelled: usize,
     /// Counter Gaussians removed.
     pub pruned: usize,
+    /// Labels the consensus absorbed whole that stay: they stand off their host's surface.
+    pub kept_off_host: Vec<u32>,
 }
 
 #[derive(Debug, thiserror::Error)]
@@ -220,8 +224,15 @@ impl SemanticLoop {
             update.counter_regions.iter().map(|r| r.pixels.as_slice()),
         )
         .map_err(invalid)?;
+        // A label absorbed whole must lie on its host's surface: the consensus cannot tell a
+        // strip of floor from a cup on the desk that a segment merged with it.
+        let (relabels, refused): (Vec<RelabelInstruction>, Vec<RelabelInstruction>) = update
+            .relabels
+            .iter()
+            .cloned()
+            .partition(|r| r.scope == RelabelScope::Pixels || lies_on_host(map, r.from, r.to));
         let relabelled =
-            apply_relabels(&render.top_k, &mut map.labels, update.relabels).map_err(invalid)?;
+            apply_relabels(&render.top_k, &mut map.labels, &relabels).map_err(invalid)?;
         let counters = {
             let map = &*map;
             select_counter_gaussians(
@@ -255,6 +266,7 @@ impl SemanticLoop {
             relabelled,
             labelled,
             pruned: counters.len(),
+            kept_off_host: refused.iter().map(|r| r.from).collect(),
         })
     }
 }

@@ -3,7 +3,7 @@
 
 use opengs_geometry::{Intrinsics, Pose};
 use opengs_mapping::{ConsensusApplyError, ConsensusUpdate, Mapper, MapperConfig};
-use opengs_semantics::{CounterPruneRegion, RelabelInstruction};
+use opengs_semantics::{CounterPruneRegion, RelabelInstruction, RelabelScope};
 use opengs_splat::{Camera, Gaussian, GaussianMap};
 
 const W: u32 = 64;
@@ -87,6 +87,7 @@ fn relabel_goes_through_top_k_of_the_listed_pixels_only() {
         from: 5,
         to: 8,
         pixels: vec![px(22, 32)],
+        scope: RelabelScope::Pixels,
     }];
     let done = m.apply_consensus(&update(&labels, &relabels, &[])).unwrap();
     assert_eq!(done.relabelled, 1);
@@ -142,6 +143,7 @@ fn wrong_sizes_and_pixels_are_rejected_without_changes() {
         from: 5,
         to: 8,
         pixels: vec![W * W + 3],
+        scope: RelabelScope::Pixels,
     }];
     assert!(matches!(
         m.apply_consensus(&update(&labels, &relabels, &[])),
@@ -168,6 +170,7 @@ fn pending_top_k_follows_a_compaction() {
         from: 5,
         to: 6,
         pixels: vec![px(22, 32), px(42, 32)],
+        scope: RelabelScope::Pixels,
     }];
     let done = m.apply_consensus(&update(&labels, &relabels, &[])).unwrap();
     // G1 is gone from the kept lists; G0 (still index 0) is relabelled.
@@ -184,6 +187,7 @@ fn the_next_keyframe_render_reuses_the_buffers_and_sees_the_relabel() {
         from: 5,
         to: 8,
         pixels: vec![px(22, 32)],
+        scope: RelabelScope::Pixels,
     }];
     m.apply_consensus(&update(&labels, &first, &[])).unwrap();
     // Keyframe 8 renders into the buffers (top-K included) that keyframe 7's consensus gave back.
@@ -194,6 +198,7 @@ fn the_next_keyframe_render_reuses_the_buffers_and_sees_the_relabel() {
         from: 5,
         to: 9,
         pixels: vec![px(42, 32)],
+        scope: RelabelScope::Pixels,
     }];
     let done = m
         .apply_consensus(&ConsensusUpdate {

@@ -19,7 +19,7 @@ use opengs_runtime::{
 };
 use opengs_semantics::{
     ConsensusConfig, ConsensusOutput, GlobalLabelTable, InputLabelClass, LabelConsensus,
-    LabelTarget, RenderedInput, SegmenterInput,
+    LabelTarget, RelabelScope, RenderedInput, SegmenterInput,
 };
 
 use crate::DatasetArgs;
@@ -41,16 +41,20 @@ pub enum Ablation {
     /// No Majority relation (§5.5; not in the paper): a segment that misses the table's
     /// thresholds is "other" even when it and a map label share over half of each.
     NoMajorityMatch,
+    /// No fragment absorption (§5.5; not in the paper): a map label too small to be a Whole
+    /// part of the segment around it keeps its label for good.
+    NoFragmentAbsorb,
 }
 
 impl Ablation {
-    pub const ALL: [Ablation; 6] = [
+    pub const ALL: [Ablation; 7] = [
         Self::NoCounterPruning,
         Self::NoConfidenceUpdate,
         Self::NoPartDecay,
         Self::NoInsideSplit,
         Self::NoUnmappedAbstain,
         Self::NoMajorityMatch,
+        Self::NoFragmentAbsorb,
     ];
 
     pub fn as_str(&self) -> &'static str {
@@ -61,6 +65,7 @@ impl Ablation {
             Self::NoInsideSplit => "no-inside-split",
             Self::NoUnmappedAbstain => "no-unmapped-abstain",
             Self::NoMajorityMatch => "no-majority-match",
+            Self::NoFragmentAbsorb => "no-fragment-absorb",
         }
     }
 
@@ -72,6 +77,7 @@ impl Ablation {
             Self::NoInsideSplit => config.enable_inside_split = false,
             Self::NoUnmappedAbstain => config.unmapped_pixels_abstain = false,
             Self::NoMajorityMatch => config.majority_match = false,
+            Self::NoFragmentAbsorb => config.absorb_fragments = false,
         }
     }
 }
@@ -419,6 +425,10 @@ impl WireResult {
                     to: r.to,
                     offset,
                     count,
+                    scope: match r.scope {
+                        RelabelScope::Pixels => PixelRun::SCOPE_PIXELS,
+                        RelabelScope::Label => PixelRun::SCOPE_LABEL,
+                    },
                 }
             })
             .collect();

@@ -14,7 +14,7 @@ use opengs_geometry::{pose_from_tum, Intrinsics, Pose};
 use opengs_ipc_schema::service::{CONSENSUS, KEYFRAMES, MAP_TARGET, RENDERS, SEGMENTS};
 use opengs_ipc_schema::{
     now_ns, ConsensusHeader, KeyframeHeader, LabelCompleteness, MapTargetHeader, MapTargetParts,
-    MessageKind, RenderHeader, SegmentsHeader, Stamp,
+    MessageKind, PixelRun, RenderHeader, SegmentsHeader, Stamp,
 };
 use opengs_mapping::{
     fill_holes, optimise_final, ConsensusUpdate, DensifyInput, KeptKeyframes, Mapper, MapperConfig,
@@ -24,7 +24,7 @@ use opengs_runtime::{
     waitset, CallbackProgression, Inlet, Outlet, RunContext, TelemetrySink, WaitSetRunResult,
     HEARTBEAT,
 };
-use opengs_semantics::{CounterPruneRegion, RelabelInstruction};
+use opengs_semantics::{CounterPruneRegion, RelabelInstruction, RelabelScope};
 use opengs_splat::{read_ply_file, write_ply_file, Camera, GaussianMap};
 
 use opengs_runtime::finish_requested_flag;
@@ -474,6 +474,12 @@ impl MapperStage {
                 from: r.from,
                 to: r.to,
                 pixels: pixels(r.offset, r.count),
+                // decode checked the scope is one of the two
+                scope: if r.scope == PixelRun::SCOPE_LABEL {
+                    RelabelScope::Label
+                } else {
+                    RelabelScope::Pixels
+                },
             })
             .collect();
         let regions: Vec<CounterPruneRegion> = res
@@ -500,6 +506,13 @@ impl MapperStage {
                     done.labelled,
                     done.pruned
                 );
+                if !done.kept_off_host.is_empty() {
+                    tracing::info!(
+                        "consensus #{seq}: labels {:?} not absorbed: they stand off the surface \
+                         of the label they lie in",
+                        done.kept_off_host
+                    );
+                }
                 self.consensus_applied += 1;
                 self.telemetry.processed(&h.stamp, start, now_ns());
             }

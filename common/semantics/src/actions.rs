@@ -2,14 +2,18 @@
 
 use std::collections::{BTreeMap, BTreeSet};
 
+use crate::config::ConsensusConfig;
 use crate::intersection::Overlap;
 use crate::label_table::GlobalLabelTable;
 use crate::matching::Matching;
-use crate::output::{LabelTarget, RelabelInstruction};
+use crate::output::{LabelTarget, RelabelInstruction, RelabelScope};
 use crate::relation::Relation;
 
 /// What the decisions of one keyframe read: relations, areas and both confidences.
 pub(crate) struct Evidence<'a> {
+    pub config: &'a ConsensusConfig,
+    /// Completeness of each rendered label (§5.2); empty when nothing needs it.
+    pub completeness: &'a BTreeMap<u32, f32>,
     pub matching: &'a Matching,
     pub overlap: &'a Overlap,
     /// C_s after the input confidence update.
@@ -31,6 +35,10 @@ pub(crate) struct Decisions {
     pub parts: BTreeSet<u32>,
     /// Whole merges won by the input: merged label → input confidence.
     pub merged: Vec<(u32, f32)>,
+    /// Map labels absorbed whole into another label: they leave the table.
+    pub absorbed: Vec<u32>,
+    /// Fragments seen this keyframe and kept: their streak grows.
+    pub kept_fragments: Vec<u32>,
     pub refused: u32,
 }
 
@@ -72,7 +80,34 @@ impl Decisions {
             d.targets
                 .insert(s, (Relation::Other, LabelTarget::Background));
         }
+        Self::decide_absorbed(e, table, &mut d);
         d
+    }
+
+    /// Fragments inside a matched segment and mostly in view: a part each time (decay);
+    /// absorbed whole, hidden Gaussians included, once they were fragments in
+    /// `absorb_after_views` keyframes in a row and C_s > C_r: the decision is about the label,
+    /// not these pixels. A large label barely in view is no fragment; an object that the
+    /// segmenter merges with its support now and then is matched on its own in between.
+    fn decide_absorbed(e: &Evidence, table: &GlobalLabelTable, d: &mut Decisions) {
+        for (&r, &(s, t)) in &e.matching.fragments {
+            if conf(e.completeness, r) < e.config.absorb_min_completeness {
+                continue;
+            }
+            d.parts.insert(r);
+            let streak = table.fragment_streak(r).saturating_add(1);
+            if streak < e.config.absorb_after_views || conf(e.conf_s, s) <= conf(e.conf_r, r) {
+                d.kept_fragments.push(r);
+            } else {
+                d.relabels.push(RelabelInstruction {
+                    from: r,
+                    to: t,
+                    pixels: Vec::new(),
+                    scope: RelabelScope::Label,
+                });
+                d.absorbed.push(r);
+            }
+        }
     }
 
     /// Partial groups: returns the winning parts ℓs → ℓr that need a fresh label.
@@ -123,6 +158,7 @@ impl Decisions {
                             from: r,
                             to: t,
                             pixels: Vec::new(),
+                            scope: RelabelScope::Pixels,
                         });
                         t
                     }
@@ -145,6 +181,7 @@ impl Decisions {
                         from: r,
                         to: t,
                         pixels: Vec::new(),
+                        scope: RelabelScope::Pixels,
                     });
                     d.parts.insert(r);
                 }
@@ -192,6 +229,7 @@ impl Decisions {
                         from: r,
                         to: merged,
                         pixels: Vec::new(),
+                        scope: RelabelScope::Pixels,
                     });
                 }
             } else {

@@ -39,6 +39,17 @@ pub struct ConsensusConfig {
     /// over half of its mapped pixels with a map label ℓr, and over half of ℓr's pixels, takes
     /// ℓr (Majority). Off, it is "other" and its new Gaussians stay unlabelled.
     pub majority_match: bool,
+    /// A departure from the paper (§5.5): a map label lying wholly inside (b ≥ τ2) a segment
+    /// that Full- or Majority-matches another label, too small for a Whole part (a < τ3), is
+    /// decayed as a part and, when C_s beats its C_r, all its Gaussians take that label.
+    /// Off, such fragments of a surface keep their own label for good.
+    pub absorb_fragments: bool,
+    /// Completeness (§5.2) a fragment needs to be absorbed: most of the label is in view, so
+    /// a large label seen as a sliver inside a segment is not mistaken for a fragment.
+    pub absorb_min_completeness: f32,
+    /// Keyframes in a row a label must be a fragment before it is absorbed; a Full or
+    /// Majority match of its own in between starts the count again.
+    pub absorb_after_views: u32,
 }
 
 impl Default for ConsensusConfig {
@@ -56,6 +67,9 @@ impl Default for ConsensusConfig {
             enable_inside_split: true,
             unmapped_pixels_abstain: true,
             majority_match: true,
+            absorb_fragments: true,
+            absorb_min_completeness: 0.5,
+            absorb_after_views: 3,
         }
     }
 }
@@ -86,6 +100,12 @@ impl ConsensusConfig {
             return Err(SemanticsError::InvalidConfig(format!(
                 "counter prune scale θ={} must be finite and > 0",
                 self.counter_prune_scale
+            )));
+        }
+        if !(0.0..=1.0).contains(&self.absorb_min_completeness) {
+            return Err(SemanticsError::InvalidConfig(format!(
+                "absorb_min_completeness={} must lie in [0, 1]",
+                self.absorb_min_completeness
             )));
         }
         if self.max_labels == 0 {

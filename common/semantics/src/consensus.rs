@@ -63,8 +63,12 @@ impl LabelConsensus {
             non_zero(&overlap.rendered_area),
         );
         let raw = input_confidences(input, input_labels.iter().copied())?;
+        let completeness = if self.config.enable_confidence_update || self.config.absorb_fragments {
+            rendered_completeness(rendered, rendered_labels.iter().copied())?
+        } else {
+            BTreeMap::new()
+        };
         let conf_s = if self.config.enable_confidence_update {
-            let completeness = rendered_completeness(rendered, rendered_labels.iter().copied())?;
             update_input_confidence(&overlap, &raw, &completeness)
         } else {
             raw
@@ -81,6 +85,8 @@ impl LabelConsensus {
         let matching = Matching::resolve(&overlap, &self.config);
 
         let evidence = Evidence {
+            config: &self.config,
+            completeness: &completeness,
             matching: &matching,
             overlap: &overlap,
             conf_s: &conf_s,
@@ -92,7 +98,8 @@ impl LabelConsensus {
         Ok(self.build_output(input, rendered, &matching, &overlap, &conf_s, d))
     }
 
-    /// Full: C_r ← max(C_r, C_s); then part decay; then merged labels take C_s; then classes.
+    /// Full: C_r ← max(C_r, C_s); then part decay; then merged labels take C_s; absorbed labels
+    /// retire; then classes.
     fn update_table(
         &mut self,
         input: &SegmenterInput,
@@ -104,6 +111,12 @@ impl LabelConsensus {
             let c = self.table.confidence(r).max(conf(conf_s, s));
             self.table.set_confidence(r, c);
         }
+        for &r in matching.full.values().chain(matching.majority.values()) {
+            self.table.clear_fragment_streak(r);
+        }
+        for &r in &d.kept_fragments {
+            self.table.note_fragment(r);
+        }
         if self.config.enable_part_decay {
             for &r in &d.parts {
                 self.table.decay(r, self.config.part_decay);
@@ -111,6 +124,9 @@ impl LabelConsensus {
         }
         for &(merged, c) in &d.merged {
             self.table.set_confidence(merged, c);
+        }
+        for &r in &d.absorbed {
+            self.table.retire(r);
         }
         for (&s, (_, target)) in &d.targets {
             let class = input.classes.get(&s);

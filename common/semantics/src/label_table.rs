@@ -26,6 +26,10 @@ pub struct GlobalLabel {
     pub observations: u32,
     /// Times this label was identified as a part and decayed (§5.1).
     pub part_decays: u32,
+    /// Keyframes in a row in which this label was a fragment inside a segment matched to
+    /// another label (§5.5); a Full or Majority match of its own resets it.
+    #[serde(default)]
+    pub fragment_streak: u32,
 }
 
 /// One row of `labels.json`; the Gaussian count comes from the map owner.
@@ -44,6 +48,10 @@ pub struct GlobalLabelTable {
     cap: usize,
     next_id: u32,
     labels: BTreeMap<u32, GlobalLabel>,
+    /// Labels absorbed whole (§5.5), kept so that one the map still carries (the mapper found
+    /// it standing off its host's surface) comes back as it was.
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    retired: BTreeMap<u32, GlobalLabel>,
 }
 
 impl GlobalLabelTable {
@@ -82,6 +90,7 @@ impl GlobalLabelTable {
             cap,
             next_id: 1,
             labels: BTreeMap::new(),
+            retired: BTreeMap::new(),
         }
     }
 
@@ -131,16 +140,28 @@ impl GlobalLabelTable {
                 confidence: confidence.max(0.0),
                 observations: 0,
                 part_decays: 0,
+                fragment_streak: 0,
             },
         );
         Ok(id)
     }
 
-    /// Registers a map label this table did not allocate (confidence 0, class `None`).
+    /// Registers a map label this table does not hold: a retired one comes back as it was, its
+    /// fragment streak started again; any other with confidence 0 and class `None`.
     /// Returns true if it was new. Background 0 is never adopted.
     pub fn adopt(&mut self, id: u32) -> bool {
         if id == 0 || self.labels.contains_key(&id) {
             return false;
+        }
+        if let Some(label) = self.retired.remove(&id) {
+            self.labels.insert(
+                id,
+                GlobalLabel {
+                    fragment_streak: 0,
+                    ..label
+                },
+            );
+            return true;
         }
         self.labels.insert(
             id,
@@ -150,10 +171,19 @@ impl GlobalLabelTable {
                 confidence: 0.0,
                 observations: 0,
                 part_decays: 0,
+                fragment_streak: 0,
             },
         );
         self.next_id = self.next_id.max(id.saturating_add(1));
         true
+    }
+
+    /// Removes `id` once no Gaussian should carry it (absorbed whole); its id is never reused.
+    /// Should the map still render it, [`Self::adopt`] brings it back as it was.
+    pub fn retire(&mut self, id: u32) {
+        if let Some(label) = self.labels.remove(&id) {
+            self.retired.insert(id, label);
+        }
     }
 
     /// Records an observation of `id` with a detection; the class follows the best score
@@ -175,6 +205,25 @@ impl GlobalLabelTable {
     pub fn set_confidence(&mut self, id: u32, confidence: f32) {
         if let Some(label) = self.labels.get_mut(&id) {
             label.confidence = confidence.max(0.0);
+        }
+    }
+
+    /// Fragment streak of `id` (0 for unknown labels).
+    pub fn fragment_streak(&self, id: u32) -> u32 {
+        self.labels.get(&id).map_or(0, |l| l.fragment_streak)
+    }
+
+    /// One more keyframe in a row as a fragment (§5.5).
+    pub fn note_fragment(&mut self, id: u32) {
+        if let Some(label) = self.labels.get_mut(&id) {
+            label.fragment_streak = label.fragment_streak.saturating_add(1);
+        }
+    }
+
+    /// Matched as an object of its own: the fragment streak starts again.
+    pub fn clear_fragment_streak(&mut self, id: u32) {
+        if let Some(label) = self.labels.get_mut(&id) {
+            label.fragment_streak = 0;
         }
     }
 

@@ -70,6 +70,7 @@ pub use label_table::{GlobalLabel, GlobalLabelTable, LabelRecord};
 pub use matching::Matching;
 pub use output::{
     ConsensusOutput, CounterPruneRegion, LabelAssignment, LabelTarget, RelabelInstruction,
+    RelabelScope,
 };
 pub use relabel::{apply_relabels, validate_regions};
 pub use relation::{pair_relation, PairRelation, Relation};

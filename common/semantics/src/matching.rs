@@ -25,6 +25,10 @@ pub struct Matching {
     pub majority: BTreeMap<u32, u32>,
     /// Input labels sent to background.
     pub other: Vec<u32>,
+    /// Fragments ℓr → (ℓs, ℓt): a map label lying wholly inside (b ≥ τ2) an input segment ℓs
+    /// whose Full or Majority partner is another label ℓt, too small a share of ℓs for a Whole
+    /// part; departure, docs/METHOD.md §5.5.
+    pub fragments: BTreeMap<u32, (u32, u32)>,
 }
 
 impl Matching {
@@ -139,8 +143,36 @@ impl Matching {
                 m.other.push(s);
             }
         }
+        if config.absorb_fragments {
+            claimed.extend(m.majority.values().copied());
+            claimed.extend(m.inside.values().copied());
+            m.fragments = fragments(overlap, &m, &claimed, config);
+        }
         m
     }
+}
+
+/// Unclaimed map labels with b ≥ τ2 inside an input label that Full- or Majority-matches
+/// another map label: the fragments a Whole match would merge if they were not under τ3 of ℓs.
+fn fragments(
+    overlap: &Overlap,
+    m: &Matching,
+    claimed: &BTreeSet<u32>,
+    config: &ConsensusConfig,
+) -> BTreeMap<u32, (u32, u32)> {
+    let mut found = BTreeMap::new();
+    for (&s, &t) in m.full.iter().chain(&m.majority) {
+        for (&(_, r), _) in overlap.pairs.range((s, 1)..=(s, u32::MAX)) {
+            if r == t || claimed.contains(&r) {
+                continue;
+            }
+            if overlap.ratios(s, r).1 >= config.tau_part {
+                // b ≥ τ2 > 1/2: at most one input label can hold ℓr this way.
+                found.insert(r, (s, t));
+            }
+        }
+    }
+    found
 }
 
 /// The unclaimed rendered label ℓr that shares over half of input label `s`'s `mapped` pixels

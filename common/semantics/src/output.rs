@@ -33,6 +33,19 @@ pub struct RelabelInstruction {
     pub to: u32,
     /// Row-major pixel indices, increasing.
     pub pixels: Vec<u32>,
+    /// Which Gaussians labelled `from` change.
+    #[serde(default)]
+    pub scope: RelabelScope,
+}
+
+/// Which Gaussians labelled `from` a relabel instruction changes.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub enum RelabelScope {
+    /// Those in the top-K lists of the instruction's pixels (§4).
+    #[default]
+    Pixels,
+    /// Every one in the map: the label as a whole is absorbed (§5.5), hidden Gaussians too.
+    Label,
 }
 
 /// Symmetric difference of a Full match's masks: look for Gaussians labelled `label` there (§5.3).
@@ -82,11 +95,12 @@ impl ConsensusOutput {
                 )
             })
             .collect();
-        parts.extend(
-            self.relabels
-                .iter()
-                .map(|r| format!("relabel {} → {} ({} px)", r.from, r.to, r.pixels.len())),
-        );
+        parts.extend(self.relabels.iter().map(|r| match r.scope {
+            RelabelScope::Pixels => {
+                format!("relabel {} → {} ({} px)", r.from, r.to, r.pixels.len())
+            }
+            RelabelScope::Label => format!("absorb {} → {} (whole label)", r.from, r.to),
+        }));
         parts.join("; ")
     }
 
@@ -124,6 +138,7 @@ mod tests {
                 from: 4,
                 to: 9,
                 pixels: vec![1, 2, 3],
+                scope: RelabelScope::Pixels,
             }],
             ..ConsensusOutput::default()
         };

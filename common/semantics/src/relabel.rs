@@ -3,7 +3,7 @@
 use opengs_splat::TopK;
 
 use crate::error::{Result, SemanticsError};
-use crate::output::RelabelInstruction;
+use crate::output::{RelabelInstruction, RelabelScope};
 
 /// Checks every pixel of `regions` and every Gaussian id recorded there (against a map of
 /// `gaussians`), so a caller can validate before it changes anything.
@@ -29,8 +29,9 @@ pub fn validate_regions<'p>(
     Ok(())
 }
 
-/// Applies relabel instructions in order: in each listed pixel's top-K, a Gaussian labelled
-/// `from` gets `to`. Validates everything first, so on error no label changed.
+/// Applies relabel instructions in order: in each listed pixel's top-K (or, for
+/// [`RelabelScope::Label`], anywhere in the map) a Gaussian labelled `from` gets `to`.
+/// Validates everything first, so on error no label changed.
 /// Returns how many label writes happened.
 pub fn apply_relabels(
     top_k: &TopK,
@@ -44,6 +45,13 @@ pub fn apply_relabels(
     )?;
     let mut changed = 0;
     for instruction in relabels {
+        if instruction.scope == RelabelScope::Label && instruction.from != instruction.to {
+            for label in labels.iter_mut().filter(|l| **l == instruction.from) {
+                *label = instruction.to;
+                changed += 1;
+            }
+            continue;
+        }
         for &p in &instruction.pixels {
             for id in top_k.gaussians_at(p as usize) {
                 let label = &mut labels[id as usize]; // in range: validated above

@@ -115,9 +115,11 @@ fn confidence_update_switch_only_changes_confidences() {
 }
 
 #[test]
-fn without_confidence_update_completeness_is_not_required() {
+fn without_confidence_update_and_absorption_completeness_is_not_required() {
+    // Fragment absorption reads completeness too (is the fragment mostly in view?).
     let config = ConsensusConfig {
         enable_confidence_update: false,
+        absorb_fragments: false,
         ..ConsensusConfig::default()
     };
     let mut consensus = consensus_with(&[0.5], config);

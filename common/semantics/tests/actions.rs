@@ -4,7 +4,7 @@ mod common;
 
 use approx::assert_relative_eq;
 use common::{conf, consensus_with, Scene};
-use opengs_semantics::{ConsensusConfig, LabelTarget, RelabelInstruction, Relation};
+use opengs_semantics::{ConsensusConfig, LabelTarget, RelabelInstruction, RelabelScope, Relation};
 
 fn config() -> ConsensusConfig {
     ConsensusConfig::default()
@@ -77,7 +77,8 @@ fn partial_parts_win_get_new_labels_and_relabel_instructions() {
         vec![RelabelInstruction {
             from: 1,
             to: 2,
-            pixels: scene.rows(0..10)
+            pixels: scene.rows(0..10),
+            scope: RelabelScope::Pixels,
         }]
     );
     assert_eq!(&out.consistent_label_map[..200], &[2; 200][..]);
@@ -107,7 +108,8 @@ fn whole_input_wins_merges_parts_into_largest() {
         vec![RelabelInstruction {
             from: 2,
             to: 1,
-            pixels: scene.rows(10..15)
+            pixels: scene.rows(10..15),
+            scope: RelabelScope::Pixels,
         }]
     );
     assert!(out.consistent_label_map.iter().all(|&l| l == 1));
@@ -218,7 +220,8 @@ fn a_part_inside_a_fully_matched_label_splits_off() {
         vec![RelabelInstruction {
             from: 1,
             to: 2,
-            pixels: scene.rows(18..20)
+            pixels: scene.rows(18..20),
+            scope: RelabelScope::Pixels,
         }]
     );
     assert_eq!(out.counter_pruning.len(), 1);
@@ -241,7 +244,8 @@ fn whole_merge_ties_go_to_smallest_part_id() {
         vec![RelabelInstruction {
             from: 3,
             to: 2,
-            pixels: scene.rows(0..5)
+            pixels: scene.rows(0..5),
+            scope: RelabelScope::Pixels,
         }]
     );
 }
@@ -271,7 +275,8 @@ fn inside_a_full_matched_label_splits_off_whatever_the_confidences() {
         vec![RelabelInstruction {
             from: 1,
             to: 2,
-            pixels: scene.rows(19..20)
+            pixels: scene.rows(19..20),
+            scope: RelabelScope::Pixels,
         }]
     );
     assert_eq!(&out.consistent_label_map[..380], &[1; 380][..]);
@@ -361,4 +366,106 @@ fn a_segment_mostly_over_unmapped_space_is_new() {
     let out = scene.run(&mut consensus);
     assert_eq!(out.assignments[0].relation, Relation::New);
     assert_eq!(out.target_of(11), Some(&LabelTarget::Label(2)));
+}
+
+/// Input 5 covers the grid; rendered 1 rows 0..18 (its Full partner: mapped a = 360/400 = 0.9,
+/// b = 1) and rendered 2 rows 18..20: wholly inside input 5 (b = 1) at a = 0.1, a fragment.
+fn fragment_scene(cs: f32, fragment_completeness: f32) -> Scene {
+    let mut scene = Scene::new(20, 20);
+    scene.input_rows(0..20, 5, cs);
+    scene.rendered_rows(0..18, 1).rendered_rows(18..20, 2);
+    scene.completeness(2, fragment_completeness);
+    scene
+}
+
+#[test]
+fn a_fragment_beaten_by_the_segment_is_absorbed_whole_and_retires() {
+    // C_s = 0.8 (completeness 1 everywhere) > C_r(2) = 0.6: every Gaussian of 2 takes 1.
+    let scene = fragment_scene(0.8, 1.0);
+    let at_once = ConsensusConfig {
+        absorb_after_views: 1,
+        ..config()
+    };
+    let mut consensus = consensus_with(&[0.5, 0.6], at_once);
+    let out = scene.run(&mut consensus);
+    assert_eq!(out.assignments[0].relation, Relation::Full);
+    assert_eq!(
+        out.relabels,
+        vec![RelabelInstruction {
+            from: 2,
+            to: 1,
+            pixels: Vec::new(),
+            scope: RelabelScope::Label,
+        }]
+    );
+    assert!(out.consistent_label_map.iter().all(|&l| l == 1));
+    assert!(consensus.table().get(2).is_none(), "absorbed label retires");
+    assert_relative_eq!(conf(&consensus, 1), 0.8);
+    assert!(out.counter_pruning.iter().all(|r| r.label == 1));
+}
+
+#[test]
+fn a_fragment_kept_or_far_out_of_view_or_switched_off_keeps_its_gaussians() {
+    // (C_s, completeness of 2, absorb switch, C_r(2) after): kept by its higher confidence
+    // (decayed by δ as a part); half out of view (completeness 0.4 < 0.5, no decay); switch off.
+    let cases = [
+        (0.8, 1.0, true, 0.84),
+        (0.9, 0.4, true, 0.9),
+        (0.95, 1.0, false, 0.9),
+    ];
+    for (cs, completeness, absorb, after) in cases {
+        let scene = fragment_scene(cs, completeness);
+        let cfg = ConsensusConfig {
+            absorb_fragments: absorb,
+            absorb_after_views: 1,
+            ..config()
+        };
+        let mut consensus = consensus_with(&[0.5, 0.9], cfg);
+        let out = scene.run(&mut consensus);
+        assert!(
+            out.relabels.is_empty(),
+            "C_s {cs}, completeness {completeness}"
+        );
+        assert_relative_eq!(conf(&consensus, 2), after);
+    }
+}
+
+#[test]
+fn a_label_straddling_two_segments_is_no_fragment() {
+    // Rendered 2 (rows 17..20) lies 2/3 inside input 5 (rows 0..19); the rest is inside input
+    // 6 (rows 19..30, mostly unmapped: New). b = 2/3 < τ2, so 2 stays, whatever the confidences.
+    let mut scene = Scene::new(20, 30);
+    scene.input_rows(0..19, 5, 1.0).input_rows(19..30, 6, 1.0);
+    scene.rendered_rows(0..17, 1).rendered_rows(17..20, 2);
+    let mut consensus = consensus_with(&[0.5, 0.1], config());
+    let out = scene.run(&mut consensus);
+    assert_eq!(out.target_of(5), Some(&LabelTarget::Label(1)));
+    assert_eq!(out.assignments[1].relation, Relation::New);
+    assert!(out.relabels.is_empty());
+    assert_relative_eq!(conf(&consensus, 2), 0.1);
+}
+
+#[test]
+fn a_fragment_is_absorbed_on_its_third_view_in_a_row_and_a_match_of_its_own_restarts_the_count() {
+    let inside = fragment_scene(0.8, 1.0);
+    // Input 7 on rows 18..20 only: its own Full match (a = b = 1).
+    let mut alone = Scene::new(20, 20);
+    alone.input_rows(18..20, 7, 0.5);
+    alone.rendered_rows(18..20, 2);
+    let mut consensus = consensus_with(&[0.5, 0.6], config());
+    let absorbed = |out: &opengs_semantics::ConsensusOutput| {
+        out.relabels.iter().any(|r| r.scope == RelabelScope::Label)
+    };
+    // Two views inside 5: decayed twice, kept.
+    assert!(!absorbed(&inside.run(&mut consensus)));
+    assert!(!absorbed(&inside.run(&mut consensus)));
+    assert_relative_eq!(conf(&consensus, 2), 0.48, epsilon = 1e-6);
+    assert_eq!(consensus.table().fragment_streak(2), 2);
+    // Matched on its own: the count starts again.
+    alone.run(&mut consensus);
+    assert_eq!(consensus.table().fragment_streak(2), 0);
+    assert!(!absorbed(&inside.run(&mut consensus)));
+    assert!(!absorbed(&inside.run(&mut consensus)));
+    assert!(absorbed(&inside.run(&mut consensus)));
+    assert!(consensus.table().get(2).is_none());
 }

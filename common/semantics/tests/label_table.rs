@@ -64,6 +64,24 @@ fn adopted_labels_push_next_id_past_them() {
 }
 
 #[test]
+fn a_retired_label_the_map_still_carries_comes_back_as_it_was() {
+    let mut table = GlobalLabelTable::new(10);
+    let id = table.allocate(Some("cup"), 0.7, 0.9).expect("room");
+    table.note_fragment(id);
+    table.note_fragment(id);
+    table.retire(id);
+    assert!(table.get(id).is_none() && table.is_empty());
+    assert!(table.records(|_| 0).is_empty());
+    // The mapper kept it (it stands off its host): the next render shows it again.
+    assert!(table.adopt(id));
+    let back = table.get(id).expect("restored");
+    assert_eq!((back.class.as_deref(), back.confidence), (Some("cup"), 0.9));
+    assert_eq!(table.fragment_streak(id), 0);
+    // Ids are never reused.
+    assert_eq!(table.allocate(None, 0.0, 0.5), Ok(id + 1));
+}
+
+#[test]
 fn consensus_with_full_table_sends_new_segments_to_background() {
     // Cap 2: inputs 1, 2, 3 over unmapped space → labels 1, 2, then refusal (pixels → 0).
     let config = ConsensusConfig {

@@ -5,7 +5,7 @@ mod common;
 use common::{consensus_with, Scene};
 use opengs_semantics::{
     apply_relabels, select_counter_gaussians, ConsensusConfig, CounterPruneRegion,
-    RelabelInstruction, SemanticsError,
+    RelabelInstruction, RelabelScope, SemanticsError,
 };
 use opengs_splat::TopK;
 
@@ -72,6 +72,7 @@ fn relabel_changes_only_from_label_in_listed_pixels() {
         from: 1,
         to: 7,
         pixels: vec![0, 1],
+        scope: RelabelScope::Pixels,
     }];
     assert_eq!(apply_relabels(&view(), &mut labels, &relabels), Ok(3));
     assert_eq!(labels, [7, 7, 2, 7, 1, 1]);
@@ -85,11 +86,13 @@ fn relabel_instructions_apply_in_order() {
             from: 2,
             to: 8,
             pixels: vec![0],
+            scope: RelabelScope::Pixels,
         },
         RelabelInstruction {
             from: 1,
             to: 9,
             pixels: vec![2, 3],
+            scope: RelabelScope::Pixels,
         },
     ];
     assert_eq!(apply_relabels(&view(), &mut labels, &relabels), Ok(3));
@@ -104,11 +107,13 @@ fn bad_indices_are_errors_and_change_nothing() {
             from: 1,
             to: 7,
             pixels: vec![0],
+            scope: RelabelScope::Pixels,
         },
         RelabelInstruction {
             from: 1,
             to: 7,
             pixels: vec![4],
+            scope: RelabelScope::Pixels,
         },
     ];
     assert_eq!(
@@ -125,6 +130,7 @@ fn bad_indices_are_errors_and_change_nothing() {
         from: 1,
         to: 7,
         pixels: vec![3],
+        scope: RelabelScope::Pixels,
     }];
     assert_eq!(
         apply_relabels(&view(), &mut short, &relabels),
@@ -171,4 +177,27 @@ fn partial_split_applied_through_top_k() {
     let mut labels = [1, 1, 1, 1, 1, 1];
     apply_relabels(&view(), &mut labels, &out.relabels).expect("valid");
     assert_eq!(labels, [2, 2, 2, 1, 1, 1]);
+}
+
+#[test]
+fn a_whole_label_relabel_reaches_gaussians_no_pixel_lists() {
+    // g4 and g5 are labelled 1 but appear in no listed pixel; a whole-label relabel moves them
+    // too, and a pixel relabel after it finds no 1 left.
+    let mut labels = LABELS;
+    let relabels = [
+        RelabelInstruction {
+            from: 1,
+            to: 3,
+            pixels: Vec::new(),
+            scope: RelabelScope::Label,
+        },
+        RelabelInstruction {
+            from: 1,
+            to: 7,
+            pixels: vec![0, 1, 2, 3],
+            scope: RelabelScope::Pixels,
+        },
+    ];
+    assert_eq!(apply_relabels(&view(), &mut labels, &relabels), Ok(5));
+    assert_eq!(labels, [3, 3, 2, 3, 3, 3]);
 }
