@@ -226,13 +226,25 @@ impl SemanticLoop {
         .map_err(invalid)?;
         // A label absorbed whole must lie on its host's surface: the consensus cannot tell a
         // strip of floor from a cup on the desk that a segment merged with it.
-        let (relabels, refused): (Vec<RelabelInstruction>, Vec<RelabelInstruction>) = update
+        // Copies the instructions only when one is kept back.
+        let kept_off_host: Vec<u32> = update
             .relabels
             .iter()
-            .cloned()
-            .partition(|r| r.scope == RelabelScope::Pixels || lies_on_host(map, r.from, r.to));
-        let relabelled =
-            apply_relabels(&render.top_k, &mut map.labels, &relabels).map_err(invalid)?;
+            .filter(|r| r.scope == RelabelScope::Label && !lies_on_host(map, r.from, r.to))
+            .map(|r| r.from)
+            .collect();
+        let relabelled = if kept_off_host.is_empty() {
+            apply_relabels(&render.top_k, &mut map.labels, update.relabels)
+        } else {
+            let rest: Vec<RelabelInstruction> = update
+                .relabels
+                .iter()
+                .filter(|r| !(r.scope == RelabelScope::Label && kept_off_host.contains(&r.from)))
+                .cloned()
+                .collect();
+            apply_relabels(&render.top_k, &mut map.labels, &rest)
+        }
+        .map_err(invalid)?;
         let counters = {
             let map = &*map;
             select_counter_gaussians(
@@ -266,7 +278,7 @@ impl SemanticLoop {
             relabelled,
             labelled,
             pruned: counters.len(),
-            kept_off_host: refused.iter().map(|r| r.from).collect(),
+            kept_off_host,
         })
     }
 }
