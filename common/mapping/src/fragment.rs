@@ -24,8 +24,19 @@ pub const FRAGMENT_MAX_OFFSET_M: f32 = 0.02;
 /// Median distance of the Gaussians labelled `fragment` from the local surface of those
 /// labelled `host`; `None` when either label has no Gaussian.
 pub fn median_offset_from_host(map: &GaussianMap, fragment: u32, host: u32) -> Option<f32> {
-    let host_ids = map.indices_with_label(host);
+    median_offset(map, &map.indices_with_label(fragment), host)
+}
+
+/// True when `fragment` lies on `host`'s surface, or has no Gaussian left to move.
+pub fn lies_on_host(map: &GaussianMap, fragment: u32, host: u32) -> bool {
     let fragment_ids = map.indices_with_label(fragment);
+    fragment_ids.is_empty()
+        || median_offset(map, &fragment_ids, host).is_some_and(|d| d <= FRAGMENT_MAX_OFFSET_M)
+}
+
+/// [`median_offset_from_host`] for the Gaussians `fragment_ids`.
+fn median_offset(map: &GaussianMap, fragment_ids: &[u32], host: u32) -> Option<f32> {
+    let host_ids = map.indices_with_label(host);
     if host_ids.is_empty() || fragment_ids.is_empty() {
         return None;
     }
@@ -55,14 +66,6 @@ pub fn median_offset_from_host(map: &GaussianMap, fragment: u32, host: u32) -> O
         .collect();
     offsets.sort_unstable_by(f32::total_cmp);
     Some(offsets[offsets.len() / 2])
-}
-
-/// True when `fragment` lies on `host`'s surface, or has no Gaussian left to move.
-pub fn lies_on_host(map: &GaussianMap, fragment: u32, host: u32) -> bool {
-    if map.indices_with_label(fragment).is_empty() {
-        return true;
-    }
-    median_offset_from_host(map, fragment, host).is_some_and(|d| d <= FRAGMENT_MAX_OFFSET_M)
 }
 
 /// Unit axis of Gaussian `i` along its smallest scale: its surface normal.
