@@ -94,6 +94,9 @@ pub struct GeometryParams {
     /// (normals within `coplanar_angle`, offsets within `offset_scale` per metre) and do
     /// not touch are one surface seen around an occluder; 0 turns the join off.
     pub coplanar_min_share: f32,
+    /// Smallest planar piece (share of the frame) that joins a coplanar group holding a
+    /// segment of `coplanar_min_share`: the floor between chairs and table legs.
+    pub coplanar_piece_share: f32,
     pub coplanar_angle: f32,
     /// Pixel share of a segment's patches that must lie on its plane (normal within
     /// `coplanar_angle`, offset within `offset_scale` per metre) for it to count as planar.
@@ -118,6 +121,7 @@ impl Default for GeometryParams {
             colour_cut: 0.3,
             min_pixels: 40,
             coplanar_min_share: 0.05,
+            coplanar_piece_share: 0.005,
             coplanar_angle: 0.1,
             coplanar_inliers: 0.9,
             seed: 0x6e0_5e9,
@@ -152,9 +156,13 @@ impl GeometrySegmenter {
             .into_iter()
             .all(positive)
             && params.colour_cut.is_finite()
-            && [params.coplanar_min_share, params.coplanar_angle]
-                .into_iter()
-                .all(|x| x.is_finite() && x >= 0.0)
+            && [
+                params.coplanar_min_share,
+                params.coplanar_piece_share,
+                params.coplanar_angle,
+            ]
+            .into_iter()
+            .all(|x| x.is_finite() && x >= 0.0)
             && (0.0..=1.0).contains(&params.coplanar_inliers);
         if !valid {
             return Err(PerceptionError::InvalidInput(format!(
@@ -234,6 +242,7 @@ impl GeometrySegmenter {
         );
         let (segment_of_patch, count) = coplanar::CoplanarRules {
             min_share: p.coplanar_min_share,
+            piece_share: p.coplanar_piece_share,
             max_angle: p.coplanar_angle,
             offset_scale: p.offset_scale,
             min_inliers: p.coplanar_inliers,
