@@ -18,6 +18,10 @@
 //! alone: a floor seen between chairs and table legs comes in pieces of 0.5–5 % of the frame
 //! (scene 6: 4.8, 2.9, 1.1, 0.8 % beside one of 5.6 %), while two small coplanar faces
 //! apart from each other are as often two objects (the fronts of two boxes side by side).
+//! A piece must also have the colour of the segment it joins, up to shading
+//! ([`same_colour`]): the back of a bookshelf seen between its boards lies in its wall's
+//! plane, 1–2 cm proud, but is another material (the built-in room: brown against grey,
+//! chromaticity 0.2 apart; floor pieces measured 0.001–0.01 apart, 0.8–1.2× as bright).
 //! Pairs are taken largest first, so the pieces of a wall join before a picture on it can
 //! reach one of them.
 //!
@@ -71,6 +75,43 @@ struct Plane {
     centroid: [f32; 3],
     pixels: u32,
     planar: bool,
+}
+
+/// Whether two mean colours (RGB, 0..1) are one material under different light: their
+/// chromaticities (each channel over the sum) within `MAX_CHROMA_GAP`, their brightness
+/// within a factor `MAX_SHADING`; colours too dark for a chromaticity only by distance.
+fn same_colour(a: [f32; 3], b: [f32; 3]) -> bool {
+    let (sa, sb) = (a[0] + a[1] + a[2], b[0] + b[1] + b[2]);
+    if sa < DARK_SUM || sb < DARK_SUM {
+        let d = sub(a, b);
+        return dot(d, d).sqrt() <= DARK_GAP;
+    }
+    let chroma = |c: [f32; 3], sum: f32| c.map(|x| x / sum);
+    let gap = sub(chroma(a, sa), chroma(b, sb));
+    dot(gap, gap).sqrt() <= MAX_CHROMA_GAP && sa.max(sb) <= MAX_SHADING * sa.min(sb)
+}
+
+const MAX_CHROMA_GAP: f32 = 0.05;
+const MAX_SHADING: f32 = 2.0;
+/// Below this channel sum (RGB 0..1) chromaticity is noise: compare the colours directly,
+/// within `DARK_GAP`.
+const DARK_SUM: f32 = 0.15;
+const DARK_GAP: f32 = 0.1;
+
+/// Pixel-weighted mean colour of each segment's patches.
+fn mean_colours(stats: &[PatchStats], segment_of_patch: &[u32], count: usize) -> Vec<[f32; 3]> {
+    let mut sums = vec![([0.0f64; 3], 0.0f64); count];
+    for (st, &s) in stats.iter().zip(segment_of_patch) {
+        let (c, w) = &mut sums[s as usize];
+        let pw = f64::from(st.pixels);
+        for (sum, &x) in c.iter_mut().zip(&st.colour) {
+            *sum += pw * f64::from(x);
+        }
+        *w += pw;
+    }
+    sums.iter()
+        .map(|(c, w)| c.map(|x| (x / w.max(1.0)) as f32))
+        .collect()
 }
 
 fn dot(a: [f32; 3], b: [f32; 3]) -> f32 {
@@ -244,6 +285,7 @@ impl CoplanarRules {
                 (a.min(b), a.max(b))
             })
             .collect();
+        let colours = mean_colours(stats, segment_of_patch, count);
         let min_cos = self.max_angle.cos();
         let touch = |a: usize, b: usize| touching.contains(&(a.min(b) as u32, a.max(b) as u32));
         // Groups of indices into `large`, joined pairwise; a join never puts two touching
@@ -272,7 +314,10 @@ impl CoplanarRules {
                 let touches = group[ga]
                     .iter()
                     .any(|&x| group[gb].iter().any(|&y| touch(large[x], large[y])));
-                if !coplanar || touches {
+                // `large` runs largest first: b is the smaller, a piece when under min_pixels.
+                let foreign_piece =
+                    pb.pixels < min_pixels && !same_colour(colours[large[i]], colours[large[j]]);
+                if !coplanar || touches || foreign_piece {
                     continue;
                 }
                 let moved = std::mem::take(&mut group[gb]);
@@ -502,6 +547,66 @@ mod tests {
         // Pieces under `piece_share` stay as they are.
         let (_, count) = RULES.join(&stats, &[], &segment_of_patch, 5);
         assert_eq!(count, 5);
+    }
+
+    #[test]
+    fn a_piece_joins_only_in_its_surfaces_colour_up_to_shading() {
+        // Grey wall (segment 0) 3.5 m away; pieces of the same plane that touch nothing:
+        // the wall behind a lamp, in shadow (1: the same grey at 0.6× the brightness), and
+        // the back of a bookshelf 1 cm proud, seen between its boards (2: brown, the built-in
+        // room's colours).
+        let n = [0.0, 0.0, -1.0];
+        let grey = [0.588, 0.607, 0.590];
+        let mut stats = Vec::new();
+        let mut segment_of_patch = Vec::new();
+        for i in 0..20 {
+            let mut p = patch(
+                100,
+                [-1.5 + 0.15 * i as f32, -0.5 + 0.05 * (i % 4) as f32, 3.5],
+                n,
+            );
+            p.colour = grey;
+            stats.push(p);
+            segment_of_patch.push(0);
+        }
+        for (segment, x, colour) in [
+            (1u32, 1.8f32, grey.map(|c| 0.6 * c)),
+            (2, 1.0, [0.375, 0.230, 0.147]),
+        ] {
+            for (dx, dy) in [(0.0, 0.0), (0.1, 0.0), (0.0, 0.1), (0.1, 0.1)] {
+                let mut p = patch(25, [x + dx, 0.5 + dy, 3.49], n);
+                p.colour = colour;
+                stats.push(p);
+                segment_of_patch.push(segment);
+            }
+        }
+        let pieces = CoplanarRules {
+            piece_share: 0.01,
+            ..RULES
+        };
+        let (seg, count) = pieces.join(&stats, &[], &segment_of_patch, 3);
+        assert_eq!(count, 2, "{seg:?}");
+        assert_eq!(seg[0], seg[20], "the shaded wall joins the wall");
+        assert_ne!(seg[0], seg[24], "the bookshelf's back stays apart");
+    }
+
+    #[test]
+    fn same_colour_allows_shading_but_not_another_hue() {
+        let grey = [0.588, 0.607, 0.590];
+        assert!(same_colour(grey, grey.map(|c| 0.55 * c)));
+        assert!(
+            !same_colour(grey, grey.map(|c| 0.45 * c)),
+            "more than 2× darker"
+        );
+        assert!(
+            !same_colour(grey, [0.375, 0.230, 0.147]),
+            "brown is not grey"
+        );
+        // Floor pieces of scene 6 (blue, one in a table's shade) are one material.
+        assert!(same_colour([0.317, 0.447, 0.637], [0.257, 0.363, 0.512]));
+        // Near black, hue is noise: colours compare directly.
+        assert!(same_colour([0.02, 0.05, 0.03], [0.06, 0.02, 0.02]));
+        assert!(!same_colour([0.02, 0.05, 0.03], [0.2, 0.02, 0.02]));
     }
 
     #[test]
