@@ -35,13 +35,8 @@ fn signal(run_id: &str, stage: &str, sig: i32) {
     assert_eq!(unsafe { libc::kill(pid, sig) }, 0, "kill {stage}");
 }
 
-/// One fault-injected run: `faults` (poses to wait for, stage, signal) in order. Returns the
-/// run's directory once it ended (exit 0 and its stderr checked by the caller).
-fn faulted_run(dir: &Path, tag: &str, faults: &[(u64, &str, i32)]) -> (PathBuf, String) {
-    faulted_run_with(dir, tag, &RUN_ARGS, faults)
-}
-
-/// [`faulted_run`] with other run arguments.
+/// One fault-injected run with `args`: `faults` (poses to wait for, stage, signal) in order.
+/// Returns the run's directory once it ended (exit 0 and its stderr checked by the caller).
 fn faulted_run_with(
     dir: &Path,
     tag: &str,
@@ -134,7 +129,19 @@ fn close_to(base: &serde_json::Value, got: &serde_json::Value, tag: &str) {
     assert!(verified >= 60, "{tag}: {verified} verified poses: {got}");
 }
 
-const RUN_ARGS: [&str; 4] = ["--frames", "120", "--finish-steps", "0"];
+/// Killed and hung stages are compared with the fault-free run under the ground-truth
+/// segmenter: a fault shifts which frames become keyframes, and with `geometry`, which cuts
+/// every frame anew, that alone can leave a box its segmenter once merged with the table in
+/// the table's label for good (mIoU 79.4 against 88.0 in some runs of one build, within 1 in
+/// others). The faults' cost is what this test measures, not that chaos.
+const FAULT_ARGS: [&str; 6] = [
+    "--frames",
+    "120",
+    "--finish-steps",
+    "0",
+    "--segmenter",
+    "prior",
+];
 
 #[test]
 fn killed_and_hung_stages_cost_seconds_not_the_run() {
@@ -142,7 +149,7 @@ fn killed_and_hung_stages_cost_seconds_not_the_run() {
     let dir = tempfile::tempdir().expect("tmp");
     let clean = dir.path().join("clean");
     let run = opengs_run(&format!("t{}-clean", std::process::id()), &clean)
-        .args(RUN_ARGS)
+        .args(FAULT_ARGS)
         .output()
         .expect("run");
     assert!(
@@ -156,9 +163,10 @@ fn killed_and_hung_stages_cost_seconds_not_the_run() {
     // each keyframe and consensus since), then the consensus. Before: a mapper killed before
     // its first checkpoint came back empty (PSNR 12.7 dB); a restarted consensus skipped
     // keyframes without a word.
-    let (out, _) = faulted_run(
+    let (out, _) = faulted_run_with(
         dir.path(),
         "map",
+        &FAULT_ARGS,
         &[
             (30, "mapper", libc::SIGKILL),
             (60, "consensus", libc::SIGKILL),
@@ -183,9 +191,10 @@ fn killed_and_hung_stages_cost_seconds_not_the_run() {
 
     // The tracker: killed (before: it restarted at the identity, ATE 45.9 cm), then hung,
     // which only the watchdog can tell.
-    let (out, stderr) = faulted_run(
+    let (out, stderr) = faulted_run_with(
         dir.path(),
         "track",
+        &FAULT_ARGS,
         &[
             (40, "tracker", libc::SIGKILL),
             (80, "tracker", libc::SIGSTOP),

@@ -80,7 +80,12 @@ struct Plane {
 /// Whether two mean colours (RGB, 0..1) are one material under different light: their
 /// chromaticities (each channel over the sum) within `MAX_CHROMA_GAP`, their brightness
 /// within a factor `MAX_SHADING`; colours too dark for a chromaticity only by distance.
-fn same_colour(a: [f32; 3], b: [f32; 3]) -> bool {
+pub(super) fn same_colour(a: [f32; 3], b: [f32; 3]) -> bool {
+    same_colour_within(a, b, MAX_CHROMA_GAP, MAX_SHADING)
+}
+
+/// [`same_colour`] with its chromaticity gap and brightness factor given.
+pub(super) fn same_colour_within(a: [f32; 3], b: [f32; 3], chroma_gap: f32, shading: f32) -> bool {
     let (sa, sb) = (a[0] + a[1] + a[2], b[0] + b[1] + b[2]);
     if sa < DARK_SUM || sb < DARK_SUM {
         let d = sub(a, b);
@@ -88,7 +93,7 @@ fn same_colour(a: [f32; 3], b: [f32; 3]) -> bool {
     }
     let chroma = |c: [f32; 3], sum: f32| c.map(|x| x / sum);
     let gap = sub(chroma(a, sa), chroma(b, sb));
-    dot(gap, gap).sqrt() <= MAX_CHROMA_GAP && sa.max(sb) <= MAX_SHADING * sa.min(sb)
+    dot(gap, gap).sqrt() <= chroma_gap && sa.max(sb) <= shading * sa.min(sb)
 }
 
 const MAX_CHROMA_GAP: f32 = 0.05;
@@ -99,7 +104,11 @@ const DARK_SUM: f32 = 0.15;
 const DARK_GAP: f32 = 0.1;
 
 /// Pixel-weighted mean colour of each segment's patches.
-fn mean_colours(stats: &[PatchStats], segment_of_patch: &[u32], count: usize) -> Vec<[f32; 3]> {
+pub(super) fn mean_colours(
+    stats: &[PatchStats],
+    segment_of_patch: &[u32],
+    count: usize,
+) -> Vec<[f32; 3]> {
     let mut sums = vec![([0.0f64; 3], 0.0f64); count];
     for (st, &s) in stats.iter().zip(segment_of_patch) {
         let (c, w) = &mut sums[s as usize];

@@ -25,8 +25,10 @@
 //!      pattern is one surface.
 //! 4. Segments = connected components of patches over joined boundaries;
 //!    pieces under `min_pixels` join the neighbour with the weakest cut;
-//!    large planar segments in one plane that do not touch join
-//!    ([`coplanar`]: one floor around a table's legs).
+//!    large planar segments in one plane that do not touch join, and small
+//!    pieces in their colour with them ([`coplanar`]: one floor around a
+//!    table's legs); object-sized segments that meet at a crease in one colour
+//!    up to shading join ([`creases`]: a sofa's seat and back).
 //! 5. Holes without depth take the single segment around them, else 0.
 //! 6. Confidence = boundary-length-weighted mean evidence of the segment's
 //!    cut boundaries (a depth step is 1, a colour cut at most 0.5).
@@ -42,12 +44,16 @@
 //!   the small-piece rule gives it to one.
 //! - Two boxes of equal height touching flush form one flat, coplanar top:
 //!   no RGB-D cue separates them, so they stay one (as in LCCP).
+//! - Colour joins across a crease, where LCCP always cuts: a sofa is a tall
+//!   box touching a short one, and only its one material tells it from two
+//!   boxes; two touching boxes of one colour are one object here.
 //! - Connected components, not a graph cut: one wrong join merges two
 //!   objects, but a stray wrong cut splits nothing unless it closes a
 //!   contour, which is what keeps textured surfaces whole.
 
 mod convexity;
 mod coplanar;
+mod creases;
 mod patches;
 mod regions;
 
@@ -101,6 +107,11 @@ pub struct GeometryParams {
     /// Pixel share of a segment's patches that must lie on its plane (normal within
     /// `coplanar_angle`, offset within `offset_scale` per metre) for it to count as planar.
     pub coplanar_inliers: f32,
+    /// Segments of at most this share of the frame that meet at a crease (at most
+    /// `crease_step_share` of the boundary's pixel pairs depth steps) in one colour up to
+    /// shading are one object (a sofa's seat and back); 0 turns the join off.
+    pub crease_max_share: f32,
+    pub crease_step_share: f32,
     /// Seeds the per-frame shuffle of label ids.
     pub seed: u64,
 }
@@ -124,6 +135,8 @@ impl Default for GeometryParams {
             coplanar_piece_share: 0.005,
             coplanar_angle: 0.1,
             coplanar_inliers: 0.9,
+            crease_max_share: 0.15,
+            crease_step_share: 0.25,
             seed: 0x6e0_5e9,
         }
     }
@@ -160,6 +173,8 @@ impl GeometrySegmenter {
                 params.coplanar_min_share,
                 params.coplanar_piece_share,
                 params.coplanar_angle,
+                params.crease_max_share,
+                params.crease_step_share,
             ]
             .into_iter()
             .all(|x| x.is_finite() && x >= 0.0)
@@ -248,6 +263,11 @@ impl GeometrySegmenter {
             min_inliers: p.coplanar_inliers,
             // σ(z) = s·z² over a patch w coarse pixels wide (z·w/fx metres): twice σ / width.
             normal_noise: 2.0 * noise.inverse_depth_sigma * camera.fx as f32,
+        }
+        .join(&patches.stats, &self.edges, &segment_of_patch, count);
+        let (segment_of_patch, count) = creases::CreaseRules {
+            max_share: p.crease_max_share,
+            max_step_share: p.crease_step_share,
         }
         .join(&patches.stats, &self.edges, &segment_of_patch, count);
         let confidence =

@@ -96,16 +96,35 @@ fn box_on_a_plane_with_sensor_noise() {
 
 #[test]
 fn two_boxes_touching_side_by_side_come_apart() {
-    // Touching, one colour; the taller one's side face meets the shorter
-    // one's top and front in concave creases. (Equal boxes flush in height
-    // and front would be one flat surface: no RGB-D cue separates them.)
-    let r = desk_view(vec![
-        floor(Paint::Plain(GREY)),
-        cuboid([-0.4, 0.0, 1.2], [-0.1, 0.3, 1.5], GREY),
-        cuboid([-0.1, 0.0, 1.3], [0.2, 0.15, 1.6], GREY),
-    ])
-    .render();
+    // Touching; the taller one's side face meets the shorter one's top and
+    // front in concave creases. (Equal boxes flush in height and front would
+    // be one flat surface: no RGB-D cue separates them.)
+    let boxes = |second: [u8; 3]| {
+        desk_view(vec![
+            floor(Paint::Plain(GREY)),
+            cuboid([-0.4, 0.0, 1.2], [-0.1, 0.3, 1.5], GREY),
+            cuboid([-0.1, 0.0, 1.3], [0.2, 0.15, 1.6], second),
+        ])
+        .render()
+    };
+    let r = boxes([150, 60, 40]);
     assert_apart(&segment(&r), &r, &[0, 1, 2], "two boxes");
+    // In one colour the creases alone cut them, and the crease join (a sofa's
+    // seat and back are such two boxes) makes them one object.
+    let r = boxes(GREY);
+    let (one, _, _) = dominant(&segment(&r), &r, 1);
+    let (two, _, _) = dominant(&segment(&r), &r, 2);
+    assert_eq!(one, two, "one colour: one object");
+    let no_crease_join = GeometryParams {
+        crease_max_share: 0.0,
+        ..GeometryParams::default()
+    };
+    assert_apart(
+        &segment_with(&r, no_crease_join),
+        &r,
+        &[0, 1, 2],
+        "creases alone",
+    );
 }
 
 #[test]
