@@ -35,7 +35,7 @@ use opengs_geometry::nalgebra::{Matrix3, Vector3};
 
 use super::convexity::PatchEdge;
 use super::patches::PatchStats;
-use crate::classic::labels::compact_components;
+use super::regions::regroup;
 use crate::classic::union_find::UnionFind;
 
 /// Thresholds of the coplanar join.
@@ -344,14 +344,7 @@ impl CoplanarRules {
                 sets.union(large[pair[0]] as u32, large[pair[1]] as u32);
             }
         }
-        let (new_of_segment, joined) = compact_components(&mut sets, count);
-        (
-            segment_of_patch
-                .iter()
-                .map(|&s| new_of_segment[s as usize])
-                .collect(),
-            joined,
-        )
+        regroup(&mut sets, segment_of_patch, count)
     }
 }
 

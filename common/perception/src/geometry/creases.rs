@@ -24,7 +24,7 @@ use std::collections::BTreeMap;
 use super::convexity::PatchEdge;
 use super::coplanar::{mean_colours, same_colour_within};
 use super::patches::PatchStats;
-use crate::classic::labels::compact_components;
+use super::regions::regroup;
 use crate::classic::union_find::UnionFind;
 
 /// Chromaticity gap and brightness factor within which two sides of a crease are one material.
@@ -82,14 +82,7 @@ impl CreaseRules {
                 sets.union(a, b);
             }
         }
-        let (new_of_segment, joined) = compact_components(&mut sets, count);
-        (
-            segment_of_patch
-                .iter()
-                .map(|&s| new_of_segment[s as usize])
-                .collect(),
-            joined,
-        )
+        regroup(&mut sets, segment_of_patch, count)
     }
 }
 

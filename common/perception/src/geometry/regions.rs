@@ -5,6 +5,7 @@
 
 use super::convexity::{PatchEdge, Verdict};
 use super::patches::NO_PATCH;
+use crate::classic::labels::compact_components;
 use crate::classic::union_find::UnionFind;
 
 /// Segment index of a coarse pixel that belongs to no segment (label 0).
@@ -61,6 +62,19 @@ pub fn merge_patches(
         })
         .collect();
     (segment_of_patch, count as usize)
+}
+
+/// The segment of every patch after segments were joined in `sets` (one set per segment):
+/// ids stay dense, in first-seen order; returns them and the new count.
+pub fn regroup(sets: &mut UnionFind, segment_of_patch: &[u32], count: usize) -> (Vec<u32>, usize) {
+    let (new_of_segment, joined) = compact_components(sets, count);
+    (
+        segment_of_patch
+            .iter()
+            .map(|&s| new_of_segment[s as usize])
+            .collect(),
+        joined,
+    )
 }
 
 /// Boundary-length-weighted mean evidence of each segment's cut boundaries.
