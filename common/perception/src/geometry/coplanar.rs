@@ -19,7 +19,7 @@
 //! (scene 6: 4.8, 2.9, 1.1, 0.8 % beside one of 5.6 %), while two small coplanar faces
 //! apart from each other are as often two objects (the fronts of two boxes side by side).
 //! A piece must also have the colour of the segment it joins, up to shading
-//! ([`same_colour`]): the back of a bookshelf seen between its boards lies in its wall's
+//! ([`same_colour`](super::colour::same_colour)): the back of a bookshelf seen between its boards lies in its wall's
 //! plane, 1–2 cm proud, but is another material (the built-in room: brown against grey,
 //! chromaticity 0.2 apart; floor pieces measured 0.001–0.01 apart, 0.8–1.2× as bright).
 //! Pairs are taken largest first, so the pieces of a wall join before a picture on it can
@@ -33,6 +33,7 @@ use std::collections::HashSet;
 
 use opengs_geometry::nalgebra::{Matrix3, Vector3};
 
+use super::colour::{mean_colours, same_colour};
 use super::convexity::PatchEdge;
 use super::patches::PatchStats;
 use super::regions::regroup;
@@ -75,52 +76,6 @@ struct Plane {
     centroid: [f32; 3],
     pixels: u32,
     planar: bool,
-}
-
-/// Whether two mean colours (RGB, 0..1) are one material under different light: their
-/// chromaticities (each channel over the sum) within `MAX_CHROMA_GAP`, their brightness
-/// within a factor `MAX_SHADING`; colours too dark for a chromaticity only by distance.
-pub(super) fn same_colour(a: [f32; 3], b: [f32; 3]) -> bool {
-    same_colour_within(a, b, MAX_CHROMA_GAP, MAX_SHADING)
-}
-
-/// [`same_colour`] with its chromaticity gap and brightness factor given.
-pub(super) fn same_colour_within(a: [f32; 3], b: [f32; 3], chroma_gap: f32, shading: f32) -> bool {
-    let (sa, sb) = (a[0] + a[1] + a[2], b[0] + b[1] + b[2]);
-    if sa < DARK_SUM || sb < DARK_SUM {
-        let d = sub(a, b);
-        return dot(d, d).sqrt() <= DARK_GAP;
-    }
-    let chroma = |c: [f32; 3], sum: f32| c.map(|x| x / sum);
-    let gap = sub(chroma(a, sa), chroma(b, sb));
-    dot(gap, gap).sqrt() <= chroma_gap && sa.max(sb) <= shading * sa.min(sb)
-}
-
-const MAX_CHROMA_GAP: f32 = 0.05;
-const MAX_SHADING: f32 = 2.0;
-/// Below this channel sum (RGB 0..1) chromaticity is noise: compare the colours directly,
-/// within `DARK_GAP`.
-const DARK_SUM: f32 = 0.15;
-const DARK_GAP: f32 = 0.1;
-
-/// Pixel-weighted mean colour of each segment's patches.
-pub(super) fn mean_colours(
-    stats: &[PatchStats],
-    segment_of_patch: &[u32],
-    count: usize,
-) -> Vec<[f32; 3]> {
-    let mut sums = vec![([0.0f64; 3], 0.0f64); count];
-    for (st, &s) in stats.iter().zip(segment_of_patch) {
-        let (c, w) = &mut sums[s as usize];
-        let pw = f64::from(st.pixels);
-        for (sum, &x) in c.iter_mut().zip(&st.colour) {
-            *sum += pw * f64::from(x);
-        }
-        *w += pw;
-    }
-    sums.iter()
-        .map(|(c, w)| c.map(|x| (x / w.max(1.0)) as f32))
-        .collect()
 }
 
 fn dot(a: [f32; 3], b: [f32; 3]) -> f32 {
@@ -276,12 +231,12 @@ impl CoplanarRules {
         let min_pixels = ((self.min_share as f64 * total as f64) as u32).max(1);
         let piece_pixels =
             ((self.piece_share.min(self.min_share) as f64 * total as f64) as u32).max(1);
-        // Candidates, largest first: pairs are then tried large–large before large–small.
-        let mut large: Vec<usize> = (0..count)
+        // Planar segments of at least a piece's size, largest first: pairs are then tried large–large before large–small.
+        let mut candidates: Vec<usize> = (0..count)
             .filter(|&s| planes[s].planar && planes[s].pixels >= piece_pixels)
             .collect();
-        large.sort_by_key(|&s| (std::cmp::Reverse(planes[s].pixels), s));
-        if large.len() < 2 || planes[large[0]].pixels < min_pixels {
+        candidates.sort_by_key(|&s| (std::cmp::Reverse(planes[s].pixels), s));
+        if candidates.len() < 2 || planes[candidates[0]].pixels < min_pixels {
             return (segment_of_patch.to_vec(), count);
         }
         let touching: HashSet<(u32, u32)> = edges
@@ -297,19 +252,19 @@ impl CoplanarRules {
         let colours = mean_colours(stats, segment_of_patch, count);
         let min_cos = self.max_angle.cos();
         let touch = |a: usize, b: usize| touching.contains(&(a.min(b) as u32, a.max(b) as u32));
-        // Groups of indices into `large`, joined pairwise; a join never puts two touching
+        // Groups of indices into `candidates`, joined pairwise; a join never puts two touching
         // segments in one group, not even through a third (a picture on its wall and a piece
-        // of that wall behind a bookshelf), and a group without a large segment joins only
+        // of that wall behind a bookshelf), and a group without a candidates segment joins only
         // one with.
-        let mut group: Vec<Vec<usize>> = (0..large.len()).map(|k| vec![k]).collect();
-        let mut group_of: Vec<usize> = (0..large.len()).collect();
-        let mut anchored: Vec<bool> = large
+        let mut group: Vec<Vec<usize>> = (0..candidates.len()).map(|k| vec![k]).collect();
+        let mut group_of: Vec<usize> = (0..candidates.len()).collect();
+        let mut anchored: Vec<bool> = candidates
             .iter()
             .map(|&s| planes[s].pixels >= min_pixels)
             .collect();
-        for i in 0..large.len() {
-            for j in i + 1..large.len() {
-                let (pa, pb) = (&planes[large[i]], &planes[large[j]]);
+        for i in 0..candidates.len() {
+            for j in i + 1..candidates.len() {
+                let (pa, pb) = (&planes[candidates[i]], &planes[candidates[j]]);
                 let (ga, gb) = (group_of[i], group_of[j]);
                 if ga == gb
                     || !(anchored[ga] || anchored[gb])
@@ -320,12 +275,14 @@ impl CoplanarRules {
                 let gap = sub(pb.centroid, pa.centroid);
                 let coplanar = dot(pa.normal, gap).abs() <= self.tolerance(pa)
                     && dot(pb.normal, gap).abs() <= self.tolerance(pb);
-                let touches = group[ga]
-                    .iter()
-                    .any(|&x| group[gb].iter().any(|&y| touch(large[x], large[y])));
-                // `large` runs largest first: b is the smaller, a piece when under min_pixels.
-                let foreign_piece =
-                    pb.pixels < min_pixels && !same_colour(colours[large[i]], colours[large[j]]);
+                let touches = group[ga].iter().any(|&x| {
+                    group[gb]
+                        .iter()
+                        .any(|&y| touch(candidates[x], candidates[y]))
+                });
+                // `candidates` runs largest first: b is the smaller, a piece when under min_pixels.
+                let foreign_piece = pb.pixels < min_pixels
+                    && !same_colour(colours[candidates[i]], colours[candidates[j]]);
                 if !coplanar || touches || foreign_piece {
                     continue;
                 }
@@ -341,7 +298,7 @@ impl CoplanarRules {
         sets.reset(count, 0.0);
         for members in &group {
             for pair in members.windows(2) {
-                sets.union(large[pair[0]] as u32, large[pair[1]] as u32);
+                sets.union(candidates[pair[0]] as u32, candidates[pair[1]] as u32);
             }
         }
         regroup(&mut sets, segment_of_patch, count)
@@ -590,25 +547,6 @@ mod tests {
         assert_eq!(count, 2, "{seg:?}");
         assert_eq!(seg[0], seg[20], "the shaded wall joins the wall");
         assert_ne!(seg[0], seg[24], "the bookshelf's back stays apart");
-    }
-
-    #[test]
-    fn same_colour_allows_shading_but_not_another_hue() {
-        let grey = [0.588, 0.607, 0.590];
-        assert!(same_colour(grey, grey.map(|c| 0.55 * c)));
-        assert!(
-            !same_colour(grey, grey.map(|c| 0.45 * c)),
-            "more than 2× darker"
-        );
-        assert!(
-            !same_colour(grey, [0.375, 0.230, 0.147]),
-            "brown is not grey"
-        );
-        // Floor pieces of scene 6 (blue, one in a table's shade) are one material.
-        assert!(same_colour([0.317, 0.447, 0.637], [0.257, 0.363, 0.512]));
-        // Near black, hue is noise: colours compare directly.
-        assert!(same_colour([0.02, 0.05, 0.03], [0.06, 0.02, 0.02]));
-        assert!(!same_colour([0.02, 0.05, 0.03], [0.2, 0.02, 0.02]));
     }
 
     #[test]

@@ -21,8 +21,8 @@
 
 use std::collections::BTreeMap;
 
+use super::colour::{mean_colours, same_colour_within};
 use super::convexity::PatchEdge;
-use super::coplanar::{mean_colours, same_colour_within};
 use super::patches::PatchStats;
 use super::regions::regroup;
 use crate::classic::union_find::UnionFind;

@@ -51,6 +51,7 @@
 //!   objects, but a stray wrong cut splits nothing unless it closes a
 //!   contour, which is what keeps textured surfaces whole.
 
+mod colour;
 mod convexity;
 mod coplanar;
 mod creases;
