@@ -126,7 +126,7 @@ impl TrackerStage {
         let k = Intrinsics::new(fx, fy, cx, cy, h.width, h.height);
         let gt_first = self.gt_first_pose;
         if self.tracker.is_none() {
-            let mut t = FrameTracker::with_background_model(TrackerConfig::for_width(h.width))?;
+            let mut t = FrameTracker::threaded(TrackerConfig::for_width(h.width))?;
             if gt_first && h.has_gt() {
                 if let Ok(p) = pose_from_tum(&h.gt_pose) {
                     t.set_first_pose(p);

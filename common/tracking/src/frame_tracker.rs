@@ -17,20 +17,23 @@
 //! (nothing in front of the measured depth). A frame that fails is lost: it
 //! is reported with the last verified pose and status `Lost`, makes no
 //! keyframe and adds nothing to the model. While lost, a relocalisation guess
-//! ([`crate::Relocaliser`]) is tried every 0.15 s until one verifies.
+//! ([`crate::Relocaliser`]) is tried every 0.15 s until one verifies: in the pipeline on
+//! a thread of its own ([`crate::relocalise_worker`]), so a lost frame costs what a
+//! tracked one does.
 
 use opengs_geometry::nalgebra::{Matrix3, Matrix6, Translation3, UnitQuaternion, Vector3};
+use std::sync::Arc;
+
 use opengs_geometry::{Intrinsics, Pose};
 use opengs_gicp::{
-    coarse_estimate, estimate_covariances_on_grid, register_coarse_to_fine, regularize,
-    sample_depth_grid, Cloud, CoarseToFine, GicpError, Registration, RegistrationConfig,
+    estimate_covariances_on_grid, regularize, sample_depth_grid, Cloud, GicpError, Registration,
     Regularization,
 };
 
+use crate::attempt::{register_verified, try_guesses, Attempt, Verified};
 use crate::model::{MapGaussians, ModelBuilder, ModelUpdate, TrackingModel};
-use crate::motion::MAX_EXTRAPOLATION_S;
-use crate::verify::{verify, verify_visibility, MotionPrior, Rejection, VerifyConfig};
-use crate::visibility::check_visibility;
+use crate::relocalise_worker::{GuessJob, RelocaliseWorker};
+use crate::verify::MotionPrior;
 use crate::{ConstantVelocity, Relocaliser, TrackerConfig};
 
 /// How a frame was tracked.
@@ -157,18 +160,27 @@ impl TrackOutcome {
 /// A spell of lost frames.
 #[derive(Debug, Clone)]
 struct LostSpell {
+    /// Which spell (answers of the relocalisation thread name it).
+    id: u64,
     /// First lost frame (the tracker's count of frames).
     since: u64,
     relocaliser: Relocaliser,
     /// Time of the last relocalisation attempt (s).
     last_attempt: f64,
+    /// Why the last attempt failed.
+    last_failure: Option<String>,
 }
 
 /// Tracks frames against a model of the map (or of its own keyframes before there is one).
 pub struct FrameTracker {
     config: TrackerConfig,
     builder: ModelBuilder,
-    model: Option<TrackingModel>,
+    /// Shared with the relocalisation thread's job, if one is out.
+    model: Option<Arc<TrackingModel>>,
+    /// Relocalisation off the tracking path (`None`: guesses are tried inline).
+    worker: Option<RelocaliseWorker>,
+    /// Lost spells so far (the next spell's id).
+    spells: u64,
     motion: ConstantVelocity,
     first_pose: Pose,
     frames: u64,
@@ -213,42 +225,6 @@ fn landing(offset: &Pose, kind: Attempt, config: &TrackerConfig) -> Landing {
     }
 }
 
-/// The checks a registration must pass: relocalisation's stricter ones when no motion
-/// prior vouches for the answer, as after a gap beyond the motion model's horizon (scene 2
-/// along fr2_desk with noise, in the pipeline: a frame after a 1.9 s gap passed tracking's
-/// checks 33–39 cm from the truth, the whole run's ATE 1.7–2.0 cm instead of 0.4–0.5).
-fn checks_for<'c>(
-    kind: Attempt,
-    prior: Option<&MotionPrior>,
-    config: &'c TrackerConfig,
-) -> &'c VerifyConfig {
-    let unpredicted = prior.is_none_or(|p| p.seconds > MAX_EXTRAPOLATION_S);
-    match kind {
-        Attempt::Relocalise => &config.relocalise.verify,
-        _ if unpredicted => &config.relocalise.verify,
-        _ => &config.verify,
-    }
-}
-
-/// What a registration is for: its stages, iteration cap and checks.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum Attempt {
-    /// The fine registration from the prediction (most frames).
-    Fast,
-    /// A turn about the camera centre, then the fine registration, from the prediction:
-    /// when the fast answer failed or slid more than `fast_path_offset` from the prediction.
-    Turned,
-    /// Coarse-to-fine, after a gap or a failed fast attempt.
-    Wide,
-    /// A fine restart near a wide search's answer.
-    Polish,
-    /// The fine registration from a screened relocalisation guess (stricter checks).
-    Relocalise,
-}
-
-/// A registration that passed (or failed) verification.
-type Verified = Result<Registration, String>;
-
 impl FrameTracker {
     /// A tracker that builds its models inline (deterministic; tests and offline tools).
     pub fn new(config: TrackerConfig) -> Self {
@@ -256,11 +232,16 @@ impl FrameTracker {
         Self::with_builder(config, builder)
     }
 
-    /// A tracker whose models are built on a thread of their own, so that a new map
-    /// never stalls tracking (the pipeline's tracker stage).
-    pub fn with_background_model(config: TrackerConfig) -> std::io::Result<Self> {
+    /// A tracker that builds its models and tries relocalisation guesses on threads of
+    /// their own, so that neither a new map nor a lost camera stalls tracking (the
+    /// pipeline's tracker stage).
+    pub fn threaded(config: TrackerConfig) -> std::io::Result<Self> {
         let builder = ModelBuilder::background(config.coarse_to_fine.coarse_voxel)?;
-        Ok(Self::with_builder(config, builder))
+        let worker = RelocaliseWorker::spawn(config.clone())?;
+        Ok(Self {
+            worker: Some(worker),
+            ..Self::with_builder(config, builder)
+        })
     }
 
     fn with_builder(config: TrackerConfig, builder: ModelBuilder) -> Self {
@@ -268,6 +249,8 @@ impl FrameTracker {
             config,
             builder,
             model: None,
+            worker: None,
+            spells: 0,
             motion: ConstantVelocity::default(),
             first_pose: Pose::identity(),
             frames: 0,
@@ -301,12 +284,12 @@ impl FrameTracker {
 
     /// Points in the model in use (0 before the first).
     pub fn model_size(&self) -> usize {
-        self.model.as_ref().map_or(0, TrackingModel::len)
+        self.model.as_deref().map_or(0, TrackingModel::len)
     }
 
     /// The model in use.
     pub fn model(&self) -> Option<&TrackingModel> {
-        self.model.as_ref()
+        self.model.as_deref()
     }
 
     /// Whether the last frame was lost.
@@ -370,7 +353,7 @@ impl FrameTracker {
                         map_seq: model.map_seq(),
                         keyframes: model.keyframes(),
                     });
-                    self.model = Some(model);
+                    self.model = Some(Arc::new(model));
                 }
                 Err(why) => updates.push(ModelUpdate::Refused(why)),
             }
@@ -450,57 +433,6 @@ impl FrameTracker {
             raw_covariances: Vec::new(),
             keyframe_shape: self.config.keyframe_shape,
         }
-    }
-
-    /// Registration of `kind` from `guess`, then verification: the statistics, the motion
-    /// prior, and what the frame sees of the model ([`crate::visibility`]).
-    fn register_verified(
-        &self,
-        frame: &DepthFrame,
-        cloud: &Cloud,
-        guess: &Pose,
-        kind: Attempt,
-        prior: Option<&MotionPrior>,
-    ) -> Verified {
-        let Some(model) = &self.model else {
-            return Err("no model to register against yet".into());
-        };
-        let c = &self.config;
-        // The exception paths are capped: a slow frame drops the next ones, whose gap
-        // calls the wide search again.
-        let (schedule, iterations) = match kind {
-            Attempt::Fast => (CoarseToFine::fine_only(), c.fast_iterations),
-            Attempt::Turned => (c.turned.clone(), c.fast_iterations),
-            Attempt::Wide => (c.coarse_to_fine.clone(), c.wide_iterations),
-            Attempt::Polish => (CoarseToFine::fine_only(), c.polish_iterations),
-            Attempt::Relocalise => (CoarseToFine::fine_only(), c.relocalise.fine_iterations),
-        };
-        // An attempt from the prediction stops as soon as it has slid (see `landing`)
-        // instead of sliding on to its iteration cap (fr2_desk with noise, two runs each:
-        // the slowest frame of scenes 1, 3, 4 and 5 69-140 -> 49-86 ms).
-        let (leash_metres, leash_radians) = match kind {
-            Attempt::Fast => (c.fast_path_offset, c.fast_path_turn),
-            Attempt::Turned => (c.fast_path_offset, f64::INFINITY),
-            _ => (f64::INFINITY, f64::INFINITY),
-        };
-        let fine = RegistrationConfig {
-            max_iterations: iterations,
-            leash_metres,
-            leash_radians,
-            ..c.registration.clone()
-        };
-        let r = register_coarse_to_fine(cloud, model.target(), guess, &fine, &schedule)
-            .map_err(|e| e.to_string())?;
-        let checks = checks_for(kind, prior, c);
-        verify(&r, prior, checks).map_err(|e: Rejection| e.to_string())?;
-        let seen = check_visibility(
-            model.target().coarse().points(),
-            &r.transform,
-            frame,
-            &checks.visibility_margin,
-        );
-        verify_visibility(&seen, checks).map_err(|e| e.to_string())?;
-        Ok(r)
     }
 
     /// Whether the time since the previous frame is a gap worth the wide search.
@@ -647,9 +579,12 @@ impl FrameTracker {
                 ..self.accept(index, timestamp, cloud, &r, TrackStatus::Tracked)
             },
             Err(why) => {
+                self.spells += 1;
                 self.lost = Some(LostSpell {
+                    id: self.spells,
                     since: index,
                     last_attempt: timestamp,
+                    last_failure: None,
                     relocaliser: Relocaliser::start(
                         &last,
                         &self.keyframe_poses,
@@ -662,40 +597,91 @@ impl FrameTracker {
         }
     }
 
-    /// Lost: a few relocalisation guesses; the first that verifies ends the spell.
+    /// Lost: a few relocalisation guesses every `attempt_every_s`; the first that
+    /// verifies ends the spell. Inline, the guesses are tried on this frame; with the
+    /// relocalisation thread, on an earlier lost frame while this one is reported lost at
+    /// once, and a verified answer puts the camera where that frame was: this frame is
+    /// tracked from there as after a gap.
     fn relocalise(&mut self, frame: &DepthFrame, index: u64, cloud: Cloud) -> TrackOutcome {
         let timestamp = frame.timestamp;
-        let per_frame = self.config.relocalise.guesses_per_frame;
         let Some(spell) = self.lost.as_mut() else {
             return self.track_from_prior(frame, index, cloud, true);
         };
-        let since = spell.since;
-        if timestamp - spell.last_attempt < self.config.relocalise.attempt_every_s {
-            return self.lose(cloud, format!("lost for {} frames", index - since + 1));
-        }
-        spell.last_attempt = timestamp;
-        let guesses = spell.relocaliser.next_guesses(per_frame);
-        let mut last_failure = String::from("no relocalisation guesses");
-        for guess in &guesses {
-            let Some(start) = self.screen_guess(frame, &cloud, guess) else {
-                last_failure = "the coarse alignment sees through the model".into();
-                continue;
-            };
-            match self.register_verified(frame, &cloud, &start, Attempt::Relocalise, None) {
+        let id = spell.id;
+        if let Some(answer) = self.worker.as_mut().and_then(|w| w.answer(id)) {
+            match answer.result {
                 Ok(r) => {
                     self.lost = None;
-                    return self.accept(index, timestamp, cloud, &r, TrackStatus::Relocalised);
+                    self.motion.update(r.transform, answer.timestamp);
+                    let mut out = self.track_from_prior(frame, index, cloud, true);
+                    if out.status == TrackStatus::Tracked {
+                        out.status = TrackStatus::Relocalised;
+                    }
+                    return out;
                 }
-                Err(why) => last_failure = why,
+                Err(why) => spell.last_failure = Some(why),
             }
         }
-        self.lose(
-            cloud,
-            format!(
-                "lost for {} frames; relocalisation: {last_failure}",
-                index - since + 1
+        let busy = self.worker.as_ref().is_some_and(RelocaliseWorker::is_busy);
+        let due = timestamp - spell.last_attempt >= self.config.relocalise.attempt_every_s;
+        if due && !busy {
+            if let Some(model) = self.model.clone() {
+                spell.last_attempt = timestamp;
+                let guesses = spell
+                    .relocaliser
+                    .next_guesses(self.config.relocalise.guesses_per_frame);
+                let submitted = self.worker.as_mut().is_some_and(|w| {
+                    w.submit(GuessJob {
+                        spell: id,
+                        timestamp,
+                        depth: frame.depth.to_vec(),
+                        depth_scale: frame.depth_scale,
+                        intrinsics: *frame.intrinsics,
+                        cloud: cloud.clone(),
+                        guesses: guesses.clone(),
+                        model: Arc::clone(&model),
+                    })
+                });
+                if !submitted {
+                    match try_guesses(&model, &self.config, frame, &cloud, &guesses) {
+                        Ok(r) => {
+                            self.lost = None;
+                            return self.accept(
+                                index,
+                                timestamp,
+                                cloud,
+                                &r,
+                                TrackStatus::Relocalised,
+                            );
+                        }
+                        Err(why) => spell.last_failure = Some(why),
+                    }
+                }
+            }
+        }
+        let why = match &spell.last_failure {
+            Some(f) => format!(
+                "lost for {} frames; relocalisation: {f}",
+                index - spell.since + 1
             ),
-        )
+            None => format!("lost for {} frames", index - spell.since + 1),
+        };
+        self.lose(cloud, why)
+    }
+
+    /// Registration of `kind` from `guess` against the model in use, then verification.
+    fn register_verified(
+        &self,
+        frame: &DepthFrame,
+        cloud: &Cloud,
+        guess: &Pose,
+        kind: Attempt,
+        prior: Option<&MotionPrior>,
+    ) -> Verified {
+        let Some(model) = self.model.as_deref() else {
+            return Err("no model to register against yet".into());
+        };
+        register_verified(model, &self.config, frame, cloud, guess, kind, prior)
     }
 
     /// Restarts of the fine registration a step away from a wide search's answer either way
@@ -738,28 +724,6 @@ impl FrameTracker {
             }
         }
         best
-    }
-
-    /// The coarse stages from a relocalisation guess, and a look at what the frame would
-    /// see of the model from there: most guesses are far off, and end here for a few
-    /// milliseconds instead of a full registration. `None` when the estimate is hopeless.
-    fn screen_guess(&self, frame: &DepthFrame, cloud: &Cloud, guess: &Pose) -> Option<Pose> {
-        let model = self.model.as_ref()?;
-        let checks = &self.config.relocalise.verify;
-        let estimate = coarse_estimate(
-            cloud,
-            model.target(),
-            guess,
-            &self.config.registration,
-            &self.config.coarse_to_fine,
-        );
-        let seen = check_visibility(
-            model.target().coarse().points(),
-            &estimate,
-            frame,
-            &checks.visibility_margin,
-        );
-        (seen.violation_ratio() <= self.config.relocalise.screen_violation).then_some(estimate)
     }
 
     /// A verified pose: update the motion model; keyframe rule; new points to the model.
@@ -915,26 +879,6 @@ mod tests {
         assert_eq!(landing(&at(0.8, 6.4), Attempt::Turned, &c), Landing::Near);
         assert_eq!(landing(&at(2.0, 0.5), Attempt::Turned, &c), Landing::Near);
         assert_eq!(landing(&at(3.0, 0.5), Attempt::Turned, &c), Landing::Slid);
-    }
-
-    #[test]
-    fn a_frame_beyond_the_motion_horizon_is_checked_as_a_relocalisation() {
-        let c = TrackerConfig::tum();
-        let after = |seconds| MotionPrior {
-            predicted: Pose::identity(),
-            seconds,
-        };
-        let strict = &c.relocalise.verify;
-        assert!(strict.min_fitness > c.verify.min_fitness);
-        assert!(strict.max_violation < c.verify.max_violation);
-        assert_eq!(checks_for(Attempt::Wide, Some(&after(0.2)), &c), &c.verify);
-        assert_eq!(
-            checks_for(Attempt::Fast, Some(&after(0.033)), &c),
-            &c.verify
-        );
-        assert_eq!(checks_for(Attempt::Wide, Some(&after(1.9)), &c), strict);
-        assert_eq!(checks_for(Attempt::Polish, Some(&after(1.9)), &c), strict);
-        assert_eq!(checks_for(Attempt::Relocalise, None, &c), strict);
     }
 
     #[test]

@@ -5,11 +5,13 @@
 //! several guesses until a result verifies again, the keyframe rule, and a
 //! model built off the tracking path.
 
+mod attempt;
 mod config;
 mod frame_tracker;
 mod model;
 mod motion;
 mod relocalise;
+mod relocalise_worker;
 mod verify;
 mod visibility;
 

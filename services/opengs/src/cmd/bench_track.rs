@@ -52,8 +52,9 @@ pub fn run(args: BenchTrackArgs) -> anyhow::Result<()> {
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(args.threads)
         .build()?;
-    // As the tracker stage: the model is rebuilt on a thread of its own.
-    let mut tracker = FrameTracker::with_background_model(TrackerConfig::for_width(k.width))?;
+    // As the tracker stage: models are built and relocalisation guesses tried on threads
+    // of their own.
+    let mut tracker = FrameTracker::threaded(TrackerConfig::for_width(k.width))?;
     if let Some(gt) = frames.first().and_then(|f| f.gt) {
         tracker.set_first_pose(gt);
     }
