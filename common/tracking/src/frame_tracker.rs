@@ -169,6 +169,8 @@ struct LostSpell {
     last_attempt: f64,
     /// Why the last attempt failed.
     last_failure: Option<String>,
+    /// Relocalisation attempts so far.
+    attempts: u32,
 }
 
 /// Tracks frames against a model of the map (or of its own keyframes before there is one).
@@ -585,6 +587,7 @@ impl FrameTracker {
                     since: index,
                     last_attempt: timestamp,
                     last_failure: None,
+                    attempts: 0,
                     relocaliser: Relocaliser::start(
                         &last,
                         &self.keyframe_poses,
@@ -630,18 +633,24 @@ impl FrameTracker {
                 let guesses = spell
                     .relocaliser
                     .next_guesses(self.config.relocalise.guesses_per_frame);
-                let submitted = self.worker.as_mut().is_some_and(|w| {
-                    w.submit(GuessJob {
-                        spell: id,
-                        timestamp,
-                        depth: frame.depth.to_vec(),
-                        depth_scale: frame.depth_scale,
-                        intrinsics: *frame.intrinsics,
-                        cloud: cloud.clone(),
-                        guesses: guesses.clone(),
-                        model: Arc::clone(&model),
-                    })
-                });
+                // The spell's first guess (the last verified pose) is tried on the frame: most
+                // spells are one frame after a gap that failed its checks, and end there
+                // (fr2_desk rows: one lost frame, not two); the rest go to the thread.
+                let first = spell.attempts == 0;
+                spell.attempts += 1;
+                let submitted = !first
+                    && self.worker.as_mut().is_some_and(|w| {
+                        w.submit(GuessJob {
+                            spell: id,
+                            timestamp,
+                            depth: frame.depth.to_vec(),
+                            depth_scale: frame.depth_scale,
+                            intrinsics: *frame.intrinsics,
+                            cloud: cloud.clone(),
+                            guesses: guesses.clone(),
+                            model: Arc::clone(&model),
+                        })
+                    });
                 if !submitted {
                     match try_guesses(&model, &self.config, frame, &cloud, &guesses) {
                         Ok(r) => {
