@@ -370,22 +370,29 @@ mod tests {
         assert_ne!(seg[0], seg[4], "the table top is not the floor");
     }
 
-    #[test]
-    fn a_wall_with_a_patch_blended_across_its_border_is_still_planar() {
-        // Two pieces of one wall either side of a bookshelf, 12 patches each; one patch of
-        // each straddles the wall's border and has a normal bent by 0.5 rad. The mean cosine
-        // (0.990) would call the wall curved; 11 of 12 patches (92 %) lie on its plane.
+    /// Two pieces of one plane facing the camera at depth `z`, `per_piece` patches each, the
+    /// first patch of each with its normal bent by 0.5 rad.
+    fn two_pieces_one_patch_bent(per_piece: usize, z: f32) -> (Vec<PatchStats>, Vec<u32>) {
         let n = [0.0, 0.0, -1.0];
         let bent = [0.479, 0.0, -0.878];
         let mut stats = Vec::new();
         let mut segment_of_patch = Vec::new();
         for (segment, x0) in [(0u32, -2.0f32), (1, 1.0)] {
-            for i in 0..12 {
+            for i in 0..per_piece {
                 let normal = if i == 0 { bent } else { n };
-                stats.push(patch(300, [x0 + 0.1 * i as f32, 0.0, 3.5], normal));
+                stats.push(patch(300, [x0 + 0.1 * i as f32, 0.0, z], normal));
                 segment_of_patch.push(segment);
             }
         }
+        (stats, segment_of_patch)
+    }
+
+    #[test]
+    fn a_wall_with_a_patch_blended_across_its_border_is_still_planar() {
+        // Two pieces of one wall either side of a bookshelf, 12 patches each; one patch of
+        // each straddles the wall's border and has a normal bent by 0.5 rad. The mean cosine
+        // (0.990) would call the wall curved; 11 of 12 patches (92 %) lie on its plane.
+        let (stats, segment_of_patch) = two_pieces_one_patch_bent(12, 3.5);
         let (seg, count) = RULES.join(&stats, &[], &segment_of_patch, 2);
         assert_eq!(count, 1, "{seg:?}");
         let strict = CoplanarRules {
@@ -404,17 +411,7 @@ mod tests {
         // The floor either side of a table leg with Kinect-like noise (scene 5, 3 m): 89 % of
         // its pixels face like its plane, the patches along the leg's edges do not. Required
         // 90 % of them, the two pieces stayed two floor labels in the map.
-        let n = [0.0, 0.0, -1.0];
-        let bent = [0.479, 0.0, -0.878];
-        let mut stats = Vec::new();
-        let mut segment_of_patch = Vec::new();
-        for (segment, x0) in [(0u32, -2.0f32), (1, 1.0)] {
-            for i in 0..9 {
-                let normal = if i == 0 { bent } else { n };
-                stats.push(patch(300, [x0 + 0.1 * i as f32, 0.0, 3.0], normal));
-                segment_of_patch.push(segment);
-            }
-        }
+        let (stats, segment_of_patch) = two_pieces_one_patch_bent(9, 3.0);
         let default = CoplanarRules {
             min_inliers: super::super::GeometryParams::default().coplanar_inliers,
             ..RULES
