@@ -5,8 +5,9 @@
 //! same code.
 
 use opengs_geometry::Pose;
-use opengs_gicp::RegistrationConfig;
-use opengs_gicp::{coarse_estimate, register_coarse_to_fine, Cloud, CoarseToFine, Registration};
+use opengs_gicp::{
+    coarse_estimate, register_coarse_to_fine, Cloud, CoarseToFine, Registration, RegistrationConfig,
+};
 
 use crate::model::TrackingModel;
 use crate::motion::MAX_EXTRAPOLATION_S;

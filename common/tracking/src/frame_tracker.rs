@@ -21,9 +21,9 @@
 //! a thread of its own ([`crate::relocalise_worker`]), so a lost frame costs what a
 //! tracked one does.
 
-use opengs_geometry::nalgebra::{Matrix3, Matrix6, Translation3, UnitQuaternion, Vector3};
 use std::sync::Arc;
 
+use opengs_geometry::nalgebra::{Matrix3, Matrix6, Translation3, UnitQuaternion, Vector3};
 use opengs_geometry::{Intrinsics, Pose};
 use opengs_gicp::{
     estimate_covariances_on_grid, regularize, sample_depth_grid, Cloud, GicpError, Registration,
