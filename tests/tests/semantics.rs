@@ -45,6 +45,14 @@ fn run(segmenter: &str, out: &Path) -> (serde_json::Value, serde_json::Value) {
         String::from_utf8_lossy(&output.stderr)
     );
     assert!(stdout.contains("mIoU"), "{stdout}");
+    // Even without a final optimisation the newest keyframe's labels reach the map.
+    let keyframes = std::fs::read_to_string(out.join("keyframes.txt")).expect("keyframes.txt");
+    let last = keyframes.lines().last().expect("a keyframe");
+    let mapper_log = std::fs::read_to_string(out.join("logs/mapper.log")).expect("mapper.log");
+    assert!(
+        mapper_log.contains(&format!("consensus #{last}:")),
+        "the last keyframe #{last}'s consensus was not applied\n{mapper_log}"
+    );
     let read = |name: &str| -> serde_json::Value {
         serde_json::from_str(&std::fs::read_to_string(out.join(name)).expect(name)).expect(name)
     };

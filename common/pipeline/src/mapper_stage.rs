@@ -199,6 +199,10 @@ struct MapperStage {
     /// Render sent, consensus not back yet: the next render waits for it, so it shows the
     /// labels this consensus sets (keyframe N+1 must see the result of N).
     outstanding: Option<(u64, Instant)>,
+    /// The newest keyframe held, and whether any segmentation came at all: at the end of
+    /// data the newest keyframe's labels are waited for (the segmenter takes the newest).
+    newest_keyframe: Option<u64>,
+    segments_seen: bool,
     cameras: VecDeque<(u64, Camera)>,
     top_k: usize,
     telemetry: TelemetrySink,
@@ -282,6 +286,17 @@ impl SegmentsQueue {
 
     fn is_empty(&self) -> bool {
         self.waiting.is_empty()
+    }
+
+    /// A segmentation [`Self::take_newest`] gave out that could not be rendered yet.
+    fn put_back(&mut self, h: SegmentsHeader) {
+        let seq = h.stamp.seq;
+        self.rendered.retain(|&s| s != seq);
+        self.waiting.insert(seq, h);
+    }
+
+    fn was_rendered(&self, seq: u64) -> bool {
+        self.rendered.contains(&seq)
     }
 }
 
@@ -400,19 +415,25 @@ impl MapperStage {
     }
 
     /// A keyframe was segmented: render the map there for the consensus (GS Voting labels,
-    /// per-label completeness); the top-K stays here until the consensus comes back.
+    /// per-label completeness); the top-K stays here until the consensus comes back. False
+    /// when the keyframe itself has not come yet (the segmenter can overtake it while this
+    /// loop applies a consensus): the segmentation waits for it.
     fn handle_segments(
         &mut self,
         pool: &rayon::ThreadPool,
         h: &SegmentsHeader,
-    ) -> anyhow::Result<()> {
+    ) -> anyhow::Result<bool> {
         let seq = h.stamp.seq;
         let Some(camera) = self.cameras.iter().find(|(s, _)| *s == seq).map(|c| c.1) else {
+            if self.newest_keyframe.is_none_or(|newest| seq > newest) {
+                tracing::debug!("segments #{seq}: before its keyframe; waits for it");
+                return Ok(false);
+            }
             tracing::warn!(
                 "segments #{seq}: dropped, stale (the keyframe is not among the newest \
                  {KEPT_CAMERAS} held here), no render"
             );
-            return Ok(());
+            return Ok(true);
         };
         if (camera.width(), camera.height()) != (h.width, h.height) {
             tracing::error!(
@@ -422,7 +443,7 @@ impl MapperStage {
                 camera.width(),
                 camera.height()
             );
-            return Ok(());
+            return Ok(true);
         }
         let start = now_ns();
         let (mapper, k) = (&mut self.mapper, self.top_k);
@@ -443,7 +464,7 @@ impl MapperStage {
         self.renders
             .send(header, |hd, buf| hd.encode(label_map, &labels, buf))?;
         self.outstanding = Some((seq, Instant::now()));
-        Ok(())
+        Ok(true)
     }
 
     /// Applies a consensus result: relabels via the kept top-K, counter pruning, labels for
@@ -571,6 +592,7 @@ impl MapperStage {
     ) {
         self.cameras
             .push_back((seq, Camera::from_pose(k, &pose, self.mapper.config().near)));
+        self.newest_keyframe = Some(self.newest_keyframe.map_or(seq, |n| n.max(seq)));
         while self.cameras.len() > KEPT_CAMERAS {
             self.cameras.pop_front();
         }
@@ -626,6 +648,8 @@ pub fn run_mapper(ctx: &RunContext, out_dir: &Path, args: &MapperArgs) -> anyhow
             _ => SegmentsQueue::after_restart(),
         },
         outstanding: None,
+        newest_keyframe: None,
+        segments_seen: false,
         cameras: VecDeque::new(),
         top_k: args.top_k.max(1),
         telemetry: TelemetrySink::new(ctx, &node, "mapper")?,
@@ -729,6 +753,7 @@ pub fn run_mapper(ctx: &RunContext, out_dir: &Path, args: &MapperArgs) -> anyhow
             stage.handle_consensus(sample.user_header(), sample.payload());
         }
         while let Some(sample) = segments.receive()? {
+            stage.segments_seen = true;
             stage.waiting_segments.push(*sample.user_header());
         }
         if stage
@@ -736,12 +761,21 @@ pub fn run_mapper(ctx: &RunContext, out_dir: &Path, args: &MapperArgs) -> anyhow
             .is_none_or(|(_, since)| since.elapsed() > CONSENSUS_TIMEOUT)
         {
             if let Some(h) = stage.waiting_segments.take_newest() {
-                stage.handle_segments(&pool, &h)?;
+                if !stage.handle_segments(&pool, &h)? {
+                    stage.waiting_segments.put_back(h);
+                }
             }
         }
         if finish.load(Ordering::Relaxed) {
-            // The last segmented keyframe's consensus still counts; then mapping ends.
-            let semantic_done = stage.waiting_segments.is_empty() && stage.outstanding.is_none();
+            // The newest keyframe's segmentation and its consensus still count (without them
+            // the Gaussians it added stay unlabelled); then mapping ends.
+            let newest_segmented = !stage.segments_seen
+                || stage
+                    .newest_keyframe
+                    .is_none_or(|k| stage.waiting_segments.was_rendered(k));
+            let semantic_done = newest_segmented
+                && stage.waiting_segments.is_empty()
+                && stage.outstanding.is_none();
             let since = *finishing.get_or_insert_with(Instant::now);
             if semantic_done || since.elapsed() > CONSENSUS_TIMEOUT {
                 ended_by_finish = true;
@@ -886,6 +920,23 @@ mod tests {
         let rest: Vec<u64> = std::iter::from_fn(|| q.take_newest().map(|h| h.stamp.seq)).collect();
         assert_eq!((first, rest), (Some(12), vec![11, 10]));
         assert!(q.is_empty());
+    }
+
+    #[test]
+    fn a_segmentation_ahead_of_its_keyframe_waits_and_is_rendered_later() {
+        let mut q = SegmentsQueue::default();
+        q.push(segments(30));
+        let early = q.take_newest();
+        assert!(q.was_rendered(30));
+        // Its keyframe has not come: back in the queue, no longer counted as rendered.
+        if let Some(h) = early {
+            q.put_back(h);
+        }
+        assert!(!q.was_rendered(30));
+        q.push(segments(20));
+        let order: Vec<u64> = std::iter::from_fn(|| q.take_newest().map(|h| h.stamp.seq)).collect();
+        assert_eq!(order, [30, 20]);
+        assert!(q.was_rendered(30) && q.was_rendered(20));
     }
 
     #[test]

@@ -29,6 +29,8 @@ pub(crate) struct Decisions {
     pub relabels: Vec<RelabelInstruction>,
     /// Input label whose pixels form relabel region i.
     pub input_regions: BTreeMap<u32, usize>,
+    /// (i, j): relabel j covers the pixels of relabel i (filled after painting).
+    pub region_copies: Vec<(usize, usize)>,
     /// Rendered label whose pixels form relabel region i.
     pub rendered_regions: BTreeMap<u32, usize>,
     /// Map labels identified as parts this keyframe (decayed once each).
@@ -153,13 +155,24 @@ impl Decisions {
                 // ℓr keeps its confidence: its Full partner just confirmed it without ℓs.
                 let target = match allocated {
                     Ok(t) => {
-                        d.input_regions.insert(s, d.relabels.len());
+                        let region = d.relabels.len();
+                        d.input_regions.insert(s, region);
                         d.relabels.push(RelabelInstruction {
                             from: r,
                             to: t,
                             pixels: Vec::new(),
                             scope: RelabelScope::Pixels,
                         });
+                        // The other held labels under ℓs move to t over the same pixels.
+                        for &also in e.matching.inside_also.get(&s).into_iter().flatten() {
+                            d.region_copies.push((region, d.relabels.len()));
+                            d.relabels.push(RelabelInstruction {
+                                from: also,
+                                to: t,
+                                pixels: Vec::new(),
+                                scope: RelabelScope::Pixels,
+                            });
+                        }
                         t
                     }
                     Err(_) => {

@@ -1,6 +1,6 @@
 //! `LabelConsensus`: owns the global label table and runs docs/METHOD.md §5 for each keyframe.
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, BTreeSet};
 
 use crate::actions::{area, conf, Decisions, Evidence};
 use crate::confidence::update_input_confidence;
@@ -10,7 +10,7 @@ use crate::error::Result;
 use crate::input::{
     input_confidences, rendered_completeness, validate_shapes, RenderedInput, SegmenterInput,
 };
-use crate::intersection::Overlap;
+use crate::intersection::{touching_labels, Overlap};
 use crate::label_table::GlobalLabelTable;
 use crate::matching::Matching;
 use crate::output::{ConsensusOutput, CounterPruneRegion, LabelAssignment, LabelTarget};
@@ -82,7 +82,18 @@ impl LabelConsensus {
             .iter()
             .map(|&r| (r, self.table.confidence(r)))
             .collect();
-        let matching = Matching::resolve(&overlap, &self.config);
+        let touching = if self.config.enable_inside_split {
+            touching_labels(input.label_map, input.width)
+        } else {
+            BTreeSet::new()
+        };
+        // Inside reads completeness where it is given, and does not require it.
+        let in_view = if completeness.is_empty() {
+            rendered.completeness
+        } else {
+            &completeness
+        };
+        let matching = Matching::resolve(&overlap, in_view, &touching, &self.config);
 
         let evidence = Evidence {
             config: &self.config,
@@ -207,6 +218,10 @@ impl LabelConsensus {
             &mut prune,
         );
         prune.retain(|region| !region.pixels.is_empty());
+        for &(from, to) in &d.region_copies {
+            let pixels = d.relabels[from].pixels.clone();
+            d.relabels[to].pixels = pixels;
+        }
 
         let assignments = d
             .targets

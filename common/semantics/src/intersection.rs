@@ -1,6 +1,6 @@
 //! Label areas |ℓ| and intersections I(ℓs, ℓr) from one pass over the pixels.
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, BTreeSet};
 
 // FxHash: the keys are labels from our own pipeline, so SipHash's flood resistance buys nothing.
 use rustc_hash::FxHashMap;
@@ -57,4 +57,30 @@ impl Overlap {
         let div = |x: f64, n: f64| if n > 0.0 { x / n } else { 0.0 };
         (div(i, ns), div(i, nr))
     }
+}
+
+/// Non-zero labels of a row-major label map that meet across a 4-neighbour edge, as
+/// (smaller, larger) pairs.
+pub fn touching_labels(label_map: &[u32], width: usize) -> BTreeSet<(u32, u32)> {
+    let mut pairs = BTreeSet::new();
+    if width == 0 {
+        return pairs;
+    }
+    let mut meet = |a: u32, b: u32| {
+        if a != b && a != 0 && b != 0 {
+            pairs.insert((a.min(b), a.max(b)));
+        }
+    };
+    for (y, row) in label_map.chunks_exact(width).enumerate() {
+        for x in 1..width {
+            meet(row[x - 1], row[x]);
+        }
+        if y > 0 {
+            let above = &label_map[(y - 1) * width..y * width];
+            for (&a, &b) in above.iter().zip(row) {
+                meet(a, b);
+            }
+        }
+    }
+    pairs
 }

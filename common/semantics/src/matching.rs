@@ -12,8 +12,11 @@ use crate::relation::{pair_relation, PairRelation};
 pub struct Matching {
     /// ℓs → ℓr of Full matches (one-to-one).
     pub full: BTreeMap<u32, u32>,
-    /// ℓs → ℓr: ℓs lies inside (a ≥ τ2) a rendered label that another input label Full-matches.
+    /// ℓs → ℓr: ℓs lies (a ≥ τ2) inside rendered labels that other input labels hold (Full,
+    /// or Majority at b < τ3); ℓr is the one it shares most with.
     pub inside: BTreeMap<u32, u32>,
+    /// ℓs → the other held labels it lies over (ascending), relabelled with ℓr.
+    pub inside_also: BTreeMap<u32, Vec<u32>>,
     /// ℓr → its Partial parts ℓs (sorted).
     pub partial: BTreeMap<u32, Vec<u32>>,
     /// ℓs → its rendered Whole parts ℓr (sorted).
@@ -32,8 +35,15 @@ pub struct Matching {
 }
 
 impl Matching {
-    /// Classifies every non-zero input label of `overlap`.
-    pub fn resolve(overlap: &Overlap, config: &ConsensusConfig) -> Self {
+    /// Classifies every non-zero input label of `overlap`; `completeness` is each rendered
+    /// label's share of its Gaussians in view (§5.2), `touching` the input label pairs that
+    /// meet in the image ([`crate::intersection::touching_labels`]).
+    pub fn resolve(
+        overlap: &Overlap,
+        completeness: &BTreeMap<u32, f32>,
+        touching: &BTreeSet<(u32, u32)>,
+        config: &ConsensusConfig,
+    ) -> Self {
         let mut m = Matching::default();
         let mut inputs: Vec<u32> = overlap
             .input_area
@@ -91,13 +101,56 @@ impl Matching {
             }
         }
         if config.enable_inside_split {
+            // Who holds each rendered label: its Full partner, else the input label sharing
+            // over half of each with it without a relation of the table, where the label is
+            // mostly in view (a floor larger than the view is seen in pieces, each a part).
+            let mut holder: BTreeMap<u32, (u32, bool)> =
+                m.full.iter().map(|(&s, &r)| (r, (s, true))).collect();
             for &s in inputs.iter().filter(|s| !m.full.contains_key(s)) {
+                let Some(r) = majority_partner(overlap, s, mapped_area(s), &full_r) else {
+                    continue;
+                };
+                let (a, b) = overlap.ratios(s, r);
+                let in_view = completeness.get(&r).copied().unwrap_or(0.0);
+                if pair_relation(a, b, config).is_none()
+                    && in_view >= config.absorb_min_completeness
+                {
+                    holder.entry(r).or_insert((s, false));
+                }
+            }
+            for &s in inputs.iter().filter(|s| !m.full.contains_key(s)) {
+                // Inside one label another input label Full-matches.
                 let cands = partners(s)
                     .filter(|&(r, _, _, a, _, _)| a >= config.tau_part && full_r.contains(&r))
                     .map(|(r, i, ..)| (r, i))
                     .collect();
                 if let Some((r, _)) = best(cands) {
                     m.inside.insert(s, r);
+                    continue;
+                }
+                // Or, together, inside labels held by input labels that do not touch ℓs: the
+                // map gave an object the label of something apart from it. A Majority-held
+                // label only where ℓs is no Partial candidate of it (b < τ3). Pieces of one
+                // surface touch each other, so they stay parts.
+                let apart = |h: u32| h != s && !touching.contains(&(s.min(h), s.max(h)));
+                let held: Vec<(u32, u32)> = partners(s)
+                    .filter(|&(r, ..)| match holder.get(&r) {
+                        Some(&(h, true)) => apart(h),
+                        Some(&(h, false)) => apart(h) && overlap.ratios(s, r).1 < config.tau_min,
+                        None => false,
+                    })
+                    .map(|(r, i, ..)| (r, i))
+                    .collect();
+                let inside: u64 = held.iter().map(|&(_, i)| u64::from(i)).sum();
+                if inside as f64 >= config.tau_part * f64::from(mapped_area(s)) {
+                    if let Some((r, _)) = best(held.clone()) {
+                        m.inside.insert(s, r);
+                        let also: Vec<u32> =
+                            held.iter().map(|&(h, _)| h).filter(|&h| h != r).collect();
+                        if !also.is_empty() {
+                            m.inside_also.insert(s, also);
+                        }
+                    }
                 }
             }
         }
@@ -146,6 +199,7 @@ impl Matching {
         if config.absorb_fragments {
             claimed.extend(m.majority.values().copied());
             claimed.extend(m.inside.values().copied());
+            claimed.extend(m.inside_also.values().flatten().copied());
             m.fragments = fragments(overlap, &m, &claimed, config);
         }
         m

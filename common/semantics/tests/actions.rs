@@ -301,6 +301,113 @@ fn without_the_inside_relation_an_absorbed_object_stays_absorbed() {
     assert_eq!(consensus.table().len(), 1);
 }
 
+/// A chair's label 1 (rows 0..15, 300 px) that absorbed a ball; the chair's segment 10 (rows
+/// 5..17) holds it by Majority (a = 200/240 = 0.83, b = 200/300 = 0.67: no relation of the
+/// table) and spills onto floor label 4 (rows 15..18, b = 40/60); `ball_rows` of input 11
+/// lie inside 1.
+fn majority_held_scene(ball_rows: std::ops::Range<usize>) -> Scene {
+    let mut scene = Scene::new(20, 20);
+    scene.rendered_rows(0..15, 1).rendered_rows(15..18, 4);
+    scene
+        .input_rows(5..17, 10, 0.9)
+        .input_rows(ball_rows, 11, 0.9);
+    scene
+}
+
+#[test]
+fn inside_a_label_another_segment_holds_by_majority_splits_off() {
+    // The ball (row 0: a = 1, b = 20/300 < τ3) has no relation of the table; the chair's
+    // segment holds label 1 without it, so the ball is Inside: fresh label 5, relabel 1 → 5.
+    let scene = majority_held_scene(0..1);
+    let mut consensus = consensus_with(&[0.9, 0.9, 0.9, 0.9], config());
+    let out = scene.run(&mut consensus);
+    assert_eq!(out.target_of(10), Some(&LabelTarget::Label(1)));
+    let ball = out.assignments.iter().find(|a| a.input_label == 11);
+    assert_eq!(ball.map(|a| a.relation), Some(Relation::Inside));
+    assert_eq!(out.target_of(11), Some(&LabelTarget::Label(5)));
+    assert_eq!(
+        out.relabels,
+        vec![RelabelInstruction {
+            from: 1,
+            to: 5,
+            pixels: scene.rows(0..1),
+            scope: RelabelScope::Pixels,
+        }]
+    );
+}
+
+#[test]
+fn a_label_mostly_out_of_view_is_held_by_no_majority() {
+    // Label 1 with 30 % of its Gaussians in view (a floor larger than the view): the segment
+    // sharing most of it is one piece of many, and the ball stays background, as before.
+    let mut scene = majority_held_scene(0..1);
+    scene.completeness(1, 0.3);
+    let mut consensus = consensus_with(&[0.9, 0.9, 0.9, 0.9], config());
+    let out = scene.run(&mut consensus);
+    assert_eq!(out.target_of(11), Some(&LabelTarget::Background));
+    assert!(out.relabels.is_empty());
+}
+
+#[test]
+fn a_piece_touching_the_segment_that_holds_its_label_is_no_inside() {
+    // Row 4 meets the chair's segment (rows 5..17): a piece of the same surface the segmenter
+    // cut off (a floor between table legs), not an object apart. No split: background.
+    let scene = majority_held_scene(4..5);
+    let mut consensus = consensus_with(&[0.9, 0.9, 0.9, 0.9], config());
+    let out = scene.run(&mut consensus);
+    assert_eq!(out.target_of(11), Some(&LabelTarget::Background));
+    assert!(out.relabels.is_empty());
+}
+
+#[test]
+fn a_tenth_of_a_majority_held_label_is_still_a_partial_part() {
+    // Rows 0..2 are 40/300 = 0.13 ≥ τ3 of label 1: a Partial part, and the confident map
+    // keeps it on 1. A segmenter's pieces of one object are no Inside.
+    let scene = majority_held_scene(0..2);
+    let mut consensus = consensus_with(&[0.95, 0.9, 0.9, 0.9], config());
+    let out = scene.run(&mut consensus);
+    let ball = out.assignments.iter().find(|a| a.input_label == 11);
+    assert_eq!(ball.map(|a| a.relation), Some(Relation::Partial));
+    assert_eq!(out.target_of(11), Some(&LabelTarget::Label(1)));
+    assert!(out.relabels.is_empty());
+}
+
+#[test]
+fn inside_two_held_labels_splits_off_from_both() {
+    // The ball (row 0) renders the chair's label 1 on 14 px and the lamp's label 2 on 6 px;
+    // the lamp's segment 12 (rows 18..20) Full-matches 2 (a = 1, b = 40/46), the chair's
+    // segment 10 holds 1 by Majority. Neither label alone holds τ2 of the ball; together all
+    // of it: Inside, and both move to the fresh label over the ball's pixels.
+    let mut scene = majority_held_scene(0..1);
+    scene
+        .rendered_span(14..20, 2)
+        .rendered_rows(18..20, 2)
+        .input_rows(18..20, 12, 0.9);
+    let mut consensus = consensus_with(&[0.9, 0.9, 0.9, 0.9], config());
+    let out = scene.run(&mut consensus);
+    assert_eq!(out.target_of(12), Some(&LabelTarget::Label(2)));
+    let ball = out.assignments.iter().find(|a| a.input_label == 11);
+    assert_eq!(ball.map(|a| a.relation), Some(Relation::Inside));
+    assert_eq!(out.target_of(11), Some(&LabelTarget::Label(5)));
+    let moved: Vec<(u32, u32, usize)> = out
+        .relabels
+        .iter()
+        .map(|r| (r.from, r.to, r.pixels.len()))
+        .collect();
+    assert_eq!(moved, vec![(1, 5, 20), (2, 5, 20)]);
+    assert!(out.relabels.iter().all(|r| r.pixels == scene.rows(0..1)));
+    // Without the Inside relation the ball is background.
+    let config_off = ConsensusConfig {
+        enable_inside_split: false,
+        ..config()
+    };
+    let mut off = consensus_with(&[0.9, 0.9, 0.9, 0.9], config_off);
+    assert_eq!(
+        scene.run(&mut off).target_of(11),
+        Some(&LabelTarget::Background)
+    );
+}
+
 #[test]
 fn inside_needs_the_full_partner_a_map_label_split_into_parts_stays_partial() {
     // The table is seen as two halves (b = 0.5 and 0.4) and the ball as rows 18..20 (b = 0.1):

@@ -163,8 +163,9 @@ pub fn execute(args: &RunArgs) -> anyhow::Result<RunSummary> {
     }
     let finish_steps = args.finish_steps.unwrap_or(DEFAULT_FINISH_STEPS);
     let mapper = deploy.stages.iter().find(|s| s.name == stage_names::MAPPER);
+    // With 0 steps the mapper still gets its finish: it takes the last keyframe's labels.
     let finish_after_data = match mapper {
-        Some(m) if finish_steps > 0 && m.finish_timeout_s > 0.0 => true,
+        Some(m) if m.finish_timeout_s > 0.0 => true,
         Some(_) if finish_steps > 0 => {
             eprintln!(
                 "--finish-steps: the mapper in {} has no finish_timeout_s; no final optimisation",
