@@ -36,8 +36,9 @@ pub struct ConsensusConfig {
     /// Gaussians never get a label.
     pub unmapped_pixels_abstain: bool,
     /// A departure from the paper (§5.5): a segment with no relation of the table that shares
-    /// over half of its mapped pixels with a map label ℓr, and over half of ℓr's pixels, takes
-    /// ℓr (Majority). Off, it is "other" and its new Gaussians stay unlabelled.
+    /// over half of its mapped pixels with a map label ℓr, and over half of ℓr's pixels, or
+    /// that has τ2 of its mapped pixels in ℓr and covers τ3 of it, takes ℓr (Majority). Off,
+    /// it is "other" and its new Gaussians stay unlabelled.
     pub majority_match: bool,
     /// A departure from the paper (§5.5): a map label lying wholly inside (b ≥ τ2) a segment
     /// that Full- or Majority-matches another label, too small for a Whole part (a < τ3), is

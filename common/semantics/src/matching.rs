@@ -24,7 +24,8 @@ pub struct Matching {
     /// Input labels over unmapped space.
     pub new: Vec<u32>,
     /// ℓs → ℓr: no relation of the table, but they share over half of each (a over mapped
-    /// pixels, and b); departure, docs/METHOD.md §5.5.
+    /// pixels, and b), or ℓs is a part of ℓr over its mapped pixels (a ≥ τ2, b ≥ τ3);
+    /// departure, docs/METHOD.md §5.5.
     pub majority: BTreeMap<u32, u32>,
     /// Input labels sent to background.
     pub other: Vec<u32>,
@@ -188,7 +189,10 @@ impl Matching {
                 m.new.push(s);
             } else if let Some(r) = config
                 .majority_match
-                .then(|| majority_partner(overlap, s, mapped_area(s), &claimed))
+                .then(|| {
+                    majority_partner(overlap, s, mapped_area(s), &claimed)
+                        .or_else(|| mapped_part_of(overlap, s, mapped_area(s), &claimed, config))
+                })
                 .flatten()
             {
                 m.majority.insert(s, r);
@@ -227,6 +231,28 @@ fn fragments(
         }
     }
     found
+}
+
+/// The unclaimed rendered label ℓr that holds τ2 of input label `s`'s `mapped` pixels and of
+/// which `s` covers at least τ3: a Partial part but for its unmapped pixels (Gaussians left
+/// unlabelled while it was "other"). It takes ℓr; no fresh label, so a surface never splits.
+fn mapped_part_of(
+    overlap: &Overlap,
+    s: u32,
+    mapped: u32,
+    claimed: &BTreeSet<u32>,
+    config: &ConsensusConfig,
+) -> Option<u32> {
+    overlap
+        .pairs
+        .range((s, 1)..=(s, u32::MAX))
+        .find(|(&(_, r), &i)| {
+            let (_, b) = overlap.ratios(s, r);
+            f64::from(i) >= config.tau_part * f64::from(mapped)
+                && b >= config.tau_min
+                && !claimed.contains(&r)
+        })
+        .map(|(&(_, r), _)| r)
 }
 
 /// The unclaimed rendered label ℓr that shares over half of input label `s`'s `mapped` pixels

@@ -112,9 +112,13 @@ fn majority_boundaries() {
         Case { name: "a = τ1, b below τ1", s_only: 60, shared: 340, r_only: 61, expected: Majority },
         // a = 359/400 misses Partial's τ2; mapped a = 1, b = 359/559.
         Case { name: "a just below τ2", s_only: 41, shared: 359, r_only: 200, expected: Majority },
-        // b = 201/400 is over half; 200/400 is not.
+        // b = 201/400 is over half; at 200/400 all its mapped pixels still lie in ℓr, of
+        // which it covers τ3 or more: a part but for its unmapped pixels.
         Case { name: "b just over half", s_only: 100, shared: 201, r_only: 199, expected: Majority },
-        Case { name: "b = half", s_only: 100, shared: 200, r_only: 200, expected: Other },
+        Case { name: "b = half", s_only: 100, shared: 200, r_only: 200, expected: Majority },
+        // b = 20/220 below τ3: no part of ℓr.
+        Case { name: "b below τ3", s_only: 100, shared: 20, r_only: 200, expected: Other },
+        Case { name: "b = τ3", s_only: 100, shared: 20, r_only: 180, expected: Majority },
     ];
     check(&cases, &ConsensusConfig::default());
 }
