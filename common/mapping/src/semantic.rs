@@ -16,7 +16,7 @@
 use std::collections::{BTreeMap, VecDeque};
 
 use opengs_semantics::{
-    apply_relabels, select_counter_gaussians, validate_regions, CounterPruneRegion,
+    apply_relabels_centred, select_counter_gaussians, validate_regions, CounterPruneRegion,
     RelabelInstruction, RelabelScope,
 };
 use opengs_splat::{render_into, Adam, Camera, GaussianMap, RenderRequest, Rendered, TopK};
@@ -233,16 +233,22 @@ impl SemanticLoop {
             .filter(|r| r.scope == RelabelScope::Label && !lies_on_host(map, r.from, r.to))
             .map(|r| r.from)
             .collect();
-        let relabelled = if kept_off_host.is_empty() {
-            apply_relabels(&render.top_k, &mut map.labels, update.relabels)
+        let rest: Vec<RelabelInstruction>;
+        let relabels = if kept_off_host.is_empty() {
+            update.relabels
         } else {
-            let rest: Vec<RelabelInstruction> = update
+            rest = update
                 .relabels
                 .iter()
                 .filter(|r| !(r.scope == RelabelScope::Label && kept_off_host.contains(&r.from)))
                 .cloned()
                 .collect();
-            apply_relabels(&render.top_k, &mut map.labels, &rest)
+            &rest
+        };
+        let relabelled = {
+            let (means, labels) = (&map.means, &mut map.labels);
+            let centre = |id: u32| centre_pixel(&render.camera, means[id as usize]);
+            apply_relabels_centred(&render.top_k, labels, relabels, centre)
         }
         .map_err(invalid)?;
         let counters = {
@@ -294,29 +300,34 @@ fn abstain_where_labels_are_thin(label_map: &mut [u32], top_k: &TopK, labels: &[
     }
 }
 
+/// The row-major pixel a Gaussian centre `mean` projects to, if in front and in view.
+fn centre_pixel(cam: &Camera, mean: [f32; 3]) -> Option<usize> {
+    let k = cam.intrinsics;
+    let [x, y, z] = cam.to_camera(mean);
+    if z <= cam.near {
+        return None;
+    }
+    let u = (k.fx as f32 * x / z + k.cx as f32).round();
+    let v = (k.fy as f32 * y / z + k.cy as f32).round();
+    (u >= 0.0 && v >= 0.0 && u < k.width as f32 && v < k.height as f32)
+        .then(|| v as usize * k.width as usize + u as usize)
+}
+
 /// Label-0 Gaussians on the rendered surface of a labelled pixel take its label.
 fn label_unlabelled(map: &mut GaussianMap, render: &KeyframeRender, labels: &[u32]) -> usize {
     let cam = &render.camera;
-    let k = cam.intrinsics;
-    let (w, h) = (k.width as f32, k.height as f32);
     let mut labelled = 0;
     for i in 0..map.len() {
         if map.labels[i] != 0 {
             continue;
         }
-        let [x, y, z] = cam.to_camera(map.means[i]);
-        if z <= cam.near {
+        let Some(p) = centre_pixel(cam, map.means[i]) else {
             continue;
-        }
-        let u = (k.fx as f32 * x / z + k.cx as f32).round();
-        let v = (k.fy as f32 * y / z + k.cy as f32).round();
-        if !(u >= 0.0 && v >= 0.0 && u < w && v < h) {
-            continue;
-        }
-        let p = v as usize * k.width as usize + u as usize;
+        };
         if labels[p] == 0 {
             continue;
         }
+        let z = cam.to_camera(map.means[i])[2];
         // Visible at its centre: a real share of the pixel's weight, or on the rendered
         // surface (D/S blends depths, so it only catches what the top-K lacks).
         let surface = render.surface_depth[p];

@@ -72,5 +72,5 @@ pub use output::{
     ConsensusOutput, CounterPruneRegion, LabelAssignment, LabelTarget, RelabelInstruction,
     RelabelScope,
 };
-pub use relabel::{apply_relabels, validate_regions};
+pub use relabel::{apply_relabels, apply_relabels_centred, validate_regions};
 pub use relation::{pair_relation, PairRelation, Relation};

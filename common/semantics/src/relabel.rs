@@ -38,14 +38,30 @@ pub fn apply_relabels(
     labels: &mut [u32],
     relabels: &[RelabelInstruction],
 ) -> Result<usize> {
+    apply_relabels_centred(top_k, labels, relabels, |_| None)
+}
+
+/// [`apply_relabels`], where a pixel-scope instruction moves only the Gaussians whose centre
+/// falls in its own pixels (`centre_pixel`: None where unknown, which moves): a large Gaussian
+/// that only overlaps a small segment belongs to what lies around it.
+pub fn apply_relabels_centred(
+    top_k: &TopK,
+    labels: &mut [u32],
+    relabels: &[RelabelInstruction],
+    centre_pixel: impl Fn(u32) -> Option<usize>,
+) -> Result<usize> {
     validate_regions(
         top_k,
         labels.len(),
         relabels.iter().map(|r| r.pixels.as_slice()),
     )?;
     let mut changed = 0;
+    let mut in_region = vec![false; top_k.pixel_count()];
     for instruction in relabels {
-        if instruction.scope == RelabelScope::Label && instruction.from != instruction.to {
+        if instruction.from == instruction.to {
+            continue;
+        }
+        if instruction.scope == RelabelScope::Label {
             for label in labels.iter_mut().filter(|l| **l == instruction.from) {
                 *label = instruction.to;
                 changed += 1;
@@ -53,13 +69,20 @@ pub fn apply_relabels(
             continue;
         }
         for &p in &instruction.pixels {
+            in_region[p as usize] = true; // in range: validated above
+        }
+        for &p in &instruction.pixels {
             for id in top_k.gaussians_at(p as usize) {
                 let label = &mut labels[id as usize]; // in range: validated above
-                if *label == instruction.from && instruction.from != instruction.to {
+                let centred = centre_pixel(id).is_none_or(|c| in_region.get(c) == Some(&true));
+                if *label == instruction.from && centred {
                     *label = instruction.to;
                     changed += 1;
                 }
             }
+        }
+        for &p in &instruction.pixels {
+            in_region[p as usize] = false;
         }
     }
     Ok(changed)

@@ -4,8 +4,8 @@ mod common;
 
 use common::{consensus_with, Scene};
 use opengs_semantics::{
-    apply_relabels, select_counter_gaussians, ConsensusConfig, CounterPruneRegion,
-    RelabelInstruction, RelabelScope, SemanticsError,
+    apply_relabels, apply_relabels_centred, select_counter_gaussians, ConsensusConfig,
+    CounterPruneRegion, RelabelInstruction, RelabelScope, SemanticsError,
 };
 use opengs_splat::TopK;
 
@@ -76,6 +76,33 @@ fn relabel_changes_only_from_label_in_listed_pixels() {
     }];
     assert_eq!(apply_relabels(&view(), &mut labels, &relabels), Ok(3));
     assert_eq!(labels, [7, 7, 2, 7, 1, 1]);
+}
+
+#[test]
+fn a_centred_relabel_moves_only_gaussians_centred_in_its_pixels() {
+    // Region pixels 0, 1 (label 1 there: g0, g1, g3). g1 is a large Gaussian centred on
+    // pixel 3, outside the region: it overlaps the segment but belongs to what lies around
+    // it, and stays. g0's centre is unknown (behind the camera): it moves, as before.
+    let centres: [Option<usize>; 6] = [None, Some(3), Some(0), Some(1), Some(2), Some(3)];
+    let mut labels = LABELS;
+    let relabels = [RelabelInstruction {
+        from: 1,
+        to: 7,
+        pixels: vec![0, 1],
+        scope: RelabelScope::Pixels,
+    }];
+    let moved = apply_relabels_centred(&view(), &mut labels, &relabels, |g| centres[g as usize]);
+    assert_eq!(moved, Ok(2));
+    assert_eq!(labels, [7, 1, 2, 7, 1, 1]);
+    // A label-scope instruction moves the whole label whatever the centres.
+    let whole = [RelabelInstruction {
+        from: 1,
+        to: 9,
+        pixels: Vec::new(),
+        scope: RelabelScope::Label,
+    }];
+    let moved = apply_relabels_centred(&view(), &mut labels, &whole, |g| centres[g as usize]);
+    assert_eq!((moved, labels), (Ok(3), [7, 9, 2, 7, 9, 9]));
 }
 
 #[test]
