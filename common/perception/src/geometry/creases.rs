@@ -17,7 +17,8 @@
 //! join's (chromaticity within 0.03, brightness within 1.35×; the built-in room's
 //! bookshelf boards and back measured 0.022 and 1.03–1.17×, scene 6's sofa 0.001–0.004
 //! and up to 1.27×): on scenes 2 and 6 the coplanar join's 0.05 and 2× also joined books
-//! to their table and a ball to its box.
+//! to their table and a ball to its box. A saturated colour (chromaticity 0.1 or more from
+//! grey) within 0.01 is one material up to 2.5×: a chair's backrest in its own shade.
 
 use std::collections::BTreeMap;
 
@@ -30,6 +31,25 @@ use crate::classic::union_find::UnionFind;
 /// Chromaticity gap and brightness factor within which two sides of a crease are one material.
 const MAX_CHROMA_GAP: f32 = 0.03;
 const MAX_SHADING: f32 = 1.35;
+/// A saturated colour (chromaticity this far from grey) kept within `SAME_HUE_GAP` is one
+/// material up to `SATURATED_SHADING`: a chair's back facing away from the light, 2.05× darker
+/// than its seat at a gap of 0.001. Greys are left out: every grey has one chromaticity.
+const MIN_SATURATION: f32 = 0.1;
+const SAME_HUE_GAP: f32 = 0.01;
+const SATURATED_SHADING: f32 = 2.5;
+
+/// Two sides of a crease in one material up to shading.
+fn one_material(a: [f32; 3], b: [f32; 3]) -> bool {
+    let saturation = |c: [f32; 3]| {
+        let sum = c[0] + c[1] + c[2];
+        let grey = 1.0 / 3.0;
+        let d = c.map(|x| x / sum.max(1e-6) - grey);
+        (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt()
+    };
+    same_colour_within(a, b, MAX_CHROMA_GAP, MAX_SHADING)
+        || (saturation(a).min(saturation(b)) >= MIN_SATURATION
+            && same_colour_within(a, b, SAME_HUE_GAP, SATURATED_SHADING))
+}
 
 /// Thresholds of the crease join.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -78,7 +98,7 @@ impl CreaseRules {
             let crease = steps as f32 <= self.max_step_share * pairs as f32;
             let parts = pixels[a as usize] <= max_pixels && pixels[b as usize] <= max_pixels;
             let (ca, cb) = (colours[a as usize], colours[b as usize]);
-            if crease && parts && same_colour_within(ca, cb, MAX_CHROMA_GAP, MAX_SHADING) {
+            if crease && parts && one_material(ca, cb) {
                 sets.union(a, b);
             }
         }
@@ -144,10 +164,11 @@ mod tests {
         let stats = patches(&[500, 500, 9000], &[FABRIC, FABRIC, [0.5; 3]]);
         let (_, count) = RULES.join(&stats, &[edge(0, 1, 50, 20)], &[0, 1, 2], 3);
         assert_eq!(count, 3, "an occlusion is no crease");
-        let brighter = FABRIC.map(|c| 1.5 * c);
-        let stats = patches(&[500, 500, 9000], &[FABRIC, brighter, [0.5; 3]]);
+        // Greys all share one chromaticity: a 1.5× brighter grey is another material.
+        let grey = [0.3; 3];
+        let stats = patches(&[500, 500, 9000], &[grey, grey.map(|c| 1.5 * c), [0.5; 3]]);
         let (_, count) = RULES.join(&stats, &[edge(0, 1, 50, 0)], &[0, 1, 2], 3);
-        assert_eq!(count, 3, "a brighter piece is another material");
+        assert_eq!(count, 3, "a brighter grey is another material");
         // The same two pieces across a crease, beside a wall (not adjacent) that makes each
         // 5 % of the frame: one object, unless the join is off.
         let stats = patches(&[500, 500, 9000], &[FABRIC, FABRIC, [0.5; 3]]);
@@ -159,5 +180,24 @@ mod tests {
         assert_eq!(count, 3, "max_share 0 turns the join off");
         let (_, count) = RULES.join(&stats, &[edge(0, 1, 50, 0)], &[0, 1, 2], 3);
         assert_eq!(count, 2);
+    }
+
+    #[test]
+    fn a_saturated_colour_in_its_own_shade_is_one_material() {
+        // Scene 6's chair (noisy, keyframe 84): seat and backrest means, one hue, the back
+        // 2.05× darker: one material. Not grey, and not another hue at the same shading.
+        let (seat, back) = ([0.639, 0.338, 0.409], [0.312, 0.165, 0.199]);
+        assert!(one_material(seat, back));
+        assert!(!one_material([0.6; 3], [0.29; 3]), "greys 2× apart");
+        let other_hue = [0.312, 0.175, 0.189]; // chromaticity 0.02 away
+        assert!(!one_material(seat, other_hue));
+        assert!(!one_material(seat, seat.map(|c| c / 3.0)), "3× darker");
+        assert!(
+            one_material(seat, seat.map(|c| c / 1.3)),
+            "the first rule still holds"
+        );
+        let stats = patches(&[500, 500, 9000], &[seat, back, [0.5; 3]]);
+        let (_, count) = RULES.join(&stats, &[edge(0, 1, 50, 0)], &[0, 1, 2], 3);
+        assert_eq!(count, 2, "seat and backrest join across their crease");
     }
 }
