@@ -243,16 +243,9 @@ fn mapped_part_of(
     claimed: &BTreeSet<u32>,
     config: &ConsensusConfig,
 ) -> Option<u32> {
-    overlap
-        .pairs
-        .range((s, 1)..=(s, u32::MAX))
-        .find(|(&(_, r), &i)| {
-            let (_, b) = overlap.ratios(s, r);
-            f64::from(i) >= config.tau_part * f64::from(mapped)
-                && b >= config.tau_min
-                && !claimed.contains(&r)
-        })
-        .map(|(&(_, r), _)| r)
+    first_partner(overlap, s, claimed, |i, b| {
+        f64::from(i) >= config.tau_part * f64::from(mapped) && b >= config.tau_min
+    })
 }
 
 /// The unclaimed rendered label ℓr that shares over half of input label `s`'s `mapped` pixels
@@ -264,12 +257,22 @@ fn majority_partner(
     mapped: u32,
     claimed: &BTreeSet<u32>,
 ) -> Option<u32> {
+    first_partner(overlap, s, claimed, |i, b| {
+        2 * u64::from(i) > u64::from(mapped) && b > 0.5
+    })
+}
+
+/// The first unclaimed non-zero rendered partner ℓr of `s` (ℓr increasing) whose shared pixels
+/// I and b = I/|ℓr| pass `test`.
+fn first_partner(
+    overlap: &Overlap,
+    s: u32,
+    claimed: &BTreeSet<u32>,
+    test: impl Fn(u32, f64) -> bool,
+) -> Option<u32> {
     overlap
         .pairs
         .range((s, 1)..=(s, u32::MAX))
-        .find(|(&(_, r), &i)| {
-            let (_, b) = overlap.ratios(s, r);
-            2 * u64::from(i) > u64::from(mapped) && b > 0.5 && !claimed.contains(&r)
-        })
+        .find(|(&(_, r), &i)| !claimed.contains(&r) && test(i, overlap.ratios(s, r).1))
         .map(|(&(_, r), _)| r)
 }
