@@ -247,7 +247,7 @@ impl SemanticLoop {
         };
         let relabelled = {
             let (means, labels) = (&map.means, &mut map.labels);
-            let centre = |id: u32| centre_pixel(&render.camera, means[id as usize]);
+            let centre = |id: u32| centre_pixel(&render.camera, means[id as usize]).map(|c| c.0);
             apply_relabels_centred(&render.top_k, labels, relabels, centre)
         }
         .map_err(invalid)?;
@@ -300,8 +300,9 @@ fn abstain_where_labels_are_thin(label_map: &mut [u32], top_k: &TopK, labels: &[
     }
 }
 
-/// The row-major pixel a Gaussian centre `mean` projects to, if in front and in view.
-fn centre_pixel(cam: &Camera, mean: [f32; 3]) -> Option<usize> {
+/// The row-major pixel a Gaussian centre `mean` projects to, and its depth, if in front and
+/// in view.
+fn centre_pixel(cam: &Camera, mean: [f32; 3]) -> Option<(usize, f32)> {
     let k = cam.intrinsics;
     let [x, y, z] = cam.to_camera(mean);
     if z <= cam.near {
@@ -310,7 +311,7 @@ fn centre_pixel(cam: &Camera, mean: [f32; 3]) -> Option<usize> {
     let u = (k.fx as f32 * x / z + k.cx as f32).round();
     let v = (k.fy as f32 * y / z + k.cy as f32).round();
     (u >= 0.0 && v >= 0.0 && u < k.width as f32 && v < k.height as f32)
-        .then(|| v as usize * k.width as usize + u as usize)
+        .then(|| (v as usize * k.width as usize + u as usize, z))
 }
 
 /// Label-0 Gaussians on the rendered surface of a labelled pixel take its label.
@@ -321,13 +322,12 @@ fn label_unlabelled(map: &mut GaussianMap, render: &KeyframeRender, labels: &[u3
         if map.labels[i] != 0 {
             continue;
         }
-        let Some(p) = centre_pixel(cam, map.means[i]) else {
+        let Some((p, z)) = centre_pixel(cam, map.means[i]) else {
             continue;
         };
         if labels[p] == 0 {
             continue;
         }
-        let z = cam.to_camera(map.means[i])[2];
         // Visible at its centre: a real share of the pixel's weight, or on the rendered
         // surface (D/S blends depths, so it only catches what the top-K lacks).
         let surface = render.surface_depth[p];
