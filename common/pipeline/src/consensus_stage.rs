@@ -179,7 +179,8 @@ struct ConsensusStage {
     resumed: bool,
 }
 
-/// What `consensus_progress.json` keeps.
+/// What `consensus_progress.json` keeps: the keyframes answered and the table after them, in
+/// one file, so a restart never resumes a table that is ahead of or behind its answers.
 #[derive(serde::Serialize, serde::Deserialize)]
 struct ConsensusProgress {
     last_answered: u64,
@@ -187,6 +188,10 @@ struct ConsensusProgress {
     /// of older runs: then every keyframe up to `last_answered` counts as answered.
     #[serde(default)]
     answered: Option<Vec<u64>>,
+    /// The table right after the last answer. Absent in files of older runs: then the table
+    /// comes from `label_table.json`.
+    #[serde(default)]
+    table: Option<GlobalLabelTable>,
 }
 
 impl ConsensusProgress {
@@ -307,19 +312,34 @@ impl ConsensusStage {
                 );
             }
             self.process(&seg, &render)?;
-            self.last_answered = Some(self.last_answered.map_or(seq, |l| l.max(seq)));
-            self.answered.insert(seq);
-            while self.answered.len() > ANSWERED_KEPT {
-                self.answered.pop_first();
-            }
-            let progress = serde_json::to_vec(&ConsensusProgress {
-                last_answered: self.last_answered.unwrap_or(seq),
-                answered: Some(self.answered.iter().copied().collect()),
-            })?;
-            let path = RunDir::new(&self.out_dir).consensus_progress();
-            if let Err(e) = opengs_eval::write_atomically(&path, &progress) {
-                tracing::error!("{}: {e}", path.display());
-            }
+        }
+        Ok(())
+    }
+
+    /// Records `seq` as answered, with the table after it in the same file, once its answer
+    /// is sent. Killed in between, the restarted process answers `seq` again from the service
+    /// history with the table from before it, so it allocates the same ids (the consensus is
+    /// deterministic) and the mapper skips the repeat; a table saved apart from the answered
+    /// set would allocate every New label of `seq` a second time.
+    fn persist_answered(&mut self, seq: u64) -> anyhow::Result<()> {
+        self.last_answered = Some(self.last_answered.map_or(seq, |l| l.max(seq)));
+        self.answered.insert(seq);
+        while self.answered.len() > ANSWERED_KEPT {
+            self.answered.pop_first();
+        }
+        let progress = serde_json::to_vec(&ConsensusProgress {
+            last_answered: self.last_answered.unwrap_or(seq),
+            answered: Some(self.answered.iter().copied().collect()),
+            table: Some(self.consensus.table().clone()),
+        })?;
+        let run = RunDir::new(&self.out_dir);
+        let path = run.consensus_progress();
+        if let Err(e) = opengs_eval::write_atomically(&path, &progress) {
+            tracing::error!("{}: {e}", path.display());
+        }
+        // The run's label table for readers (scoring, `opengs objects`).
+        if let Err(e) = self.consensus.table().save(&run.label_table()) {
+            tracing::error!("saving the label table: {e:#}");
         }
         Ok(())
     }
@@ -343,7 +363,7 @@ impl ConsensusStage {
             Err(e) => {
                 tracing::error!("keyframe #{seq}: consensus refused the inputs: {e}");
                 self.telemetry.dropped(&seg.stamp);
-                return Ok(());
+                return self.persist_answered(seq);
             }
         };
         let wire = WireResult::new(&out);
@@ -354,6 +374,7 @@ impl ConsensusStage {
         let header =
             ConsensusHeader::new(stamp, seg.width as u32, seg.height as u32, theta, &parts);
         self.out.send(header, |hd, buf| hd.encode(&parts, buf))?;
+        self.persist_answered(seq)?;
         tracing::info!(
             "keyframe #{seq}: {} input labels → {} global labels, {} relabel regions, {} counter regions",
             out.assignments.len(),
@@ -367,13 +388,6 @@ impl ConsensusStage {
                 "keyframe #{seq}: {}",
                 out.describe(|label| table.confidence(label))
             );
-        }
-        if let Err(e) = self
-            .consensus
-            .table()
-            .save(&RunDir::new(&self.out_dir).label_table())
-        {
-            tracing::error!("saving the label table: {e:#}");
         }
         self.telemetry.processed(&seg.stamp, start, now_ns());
         Ok(())
@@ -478,16 +492,20 @@ pub fn run_consensus(ctx: &RunContext, out_dir: &Path, args: &ConsensusArgs) -> 
         on(config.enable_confidence_update),
         on(config.enable_part_decay)
     );
-    let consensus = match GlobalLabelTable::load(&RunDir::new(out_dir).label_table())? {
+    let mut progress = std::fs::read(RunDir::new(out_dir).consensus_progress())
+        .ok()
+        .and_then(|bytes| serde_json::from_slice::<ConsensusProgress>(&bytes).ok());
+    let table = match progress.as_mut().and_then(|p| p.table.take()) {
+        Some(table) => Some(table),
+        None => GlobalLabelTable::load(&RunDir::new(out_dir).label_table())?,
+    };
+    let consensus = match table {
         Some(table) => {
             tracing::info!("resuming with {} global labels", table.len());
             LabelConsensus::with_table(config, table)?
         }
         None => LabelConsensus::new(config)?,
     };
-    let progress = std::fs::read(RunDir::new(out_dir).consensus_progress())
-        .ok()
-        .and_then(|bytes| serde_json::from_slice::<ConsensusProgress>(&bytes).ok());
     let resumed_from = progress.as_ref().map(|p| p.last_answered);
     std::fs::create_dir_all(out_dir)?;
     if !args.no_segment_pngs {

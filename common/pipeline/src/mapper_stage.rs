@@ -211,6 +211,9 @@ struct MapperStage {
     resumed: MapperCounters,
     /// Consensus results applied by this process.
     consensus_applied: u64,
+    /// Seqs of the newest results applied: a consensus killed between sending a result and
+    /// recording it answers that keyframe again after its restart.
+    applied_seqs: VecDeque<u64>,
     out_dir: PathBuf,
     /// Full-resolution keyframes for the final optimisation (only when it is asked for).
     kept: Option<KeptKeyframes>,
@@ -476,6 +479,10 @@ impl MapperStage {
         if self.outstanding.is_some_and(|(s, _)| s == seq) {
             self.outstanding = None;
         }
+        if self.applied_seqs.contains(&seq) {
+            tracing::info!("consensus #{seq}: applied already, the repeat skipped");
+            return;
+        }
         let view = match h.decode(payload) {
             Ok(v) => v,
             Err(e) => {
@@ -535,6 +542,10 @@ impl MapperStage {
                     );
                 }
                 self.consensus_applied += 1;
+                self.applied_seqs.push_back(seq);
+                if self.applied_seqs.len() > 64 {
+                    self.applied_seqs.pop_front();
+                }
                 self.telemetry.processed(&h.stamp, start, now_ns());
             }
             Err(e) => {
@@ -656,6 +667,7 @@ pub fn run_mapper(ctx: &RunContext, out_dir: &Path, args: &MapperArgs) -> anyhow
         map_version: 0,
         resumed,
         consensus_applied: 0,
+        applied_seqs: VecDeque::new(),
         out_dir: out_dir.to_path_buf(),
         kept: (args.run.finish_steps > 0).then(|| KeptKeyframes::new(args.finish_keyframes)),
         journal: None,

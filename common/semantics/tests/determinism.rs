@@ -3,7 +3,7 @@
 mod common;
 
 use common::Scene;
-use opengs_semantics::{ConsensusConfig, LabelConsensus};
+use opengs_semantics::{ConsensusConfig, GlobalLabelTable, LabelConsensus, Relation};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
@@ -59,4 +59,44 @@ fn repeated_runs_are_identical() {
             assert!(table_a.get(l).is_some(), "label {l} unknown");
         }
     }
+}
+
+#[test]
+fn a_table_saved_and_loaded_answers_a_keyframe_again_with_the_same_ids() {
+    // A consensus killed between sending an answer and saving it answers that keyframe again
+    // after its restart, from the table saved before it: the mapper can only skip the repeat
+    // when it carries the same labels.
+    let mut rng = ChaCha8Rng::seed_from_u64(11);
+    let mut consensus = LabelConsensus::new(ConsensusConfig::default()).expect("valid");
+    for frame in 0..6 {
+        random_scene(&mut rng, frame.min(8)).run(&mut consensus);
+    }
+    // What `save` writes and `load` reads.
+    let saved = serde_json::to_string_pretty(consensus.table()).expect("serialises");
+    let saved_len = consensus.table().len();
+    let mut next = random_scene(&mut rng, 8);
+    // Two segments over unmapped space: New, each gets a fresh label.
+    for y in 0..48 {
+        for x in 48..64 {
+            next.input[y * 64 + x] = if y < 24 { 20 } else { 21 };
+            next.rendered[y * 64 + x] = 0;
+        }
+    }
+    next.confidence.insert(20, 0.9);
+    next.confidence.insert(21, 0.8);
+    let first = next.run(&mut consensus);
+    assert_eq!(
+        first
+            .assignments
+            .iter()
+            .filter(|a| a.relation == Relation::New)
+            .count(),
+        2
+    );
+    assert!(consensus.table().len() >= saved_len + 2);
+    let loaded: GlobalLabelTable = serde_json::from_str(&saved).expect("parses");
+    let mut restarted =
+        LabelConsensus::with_table(ConsensusConfig::default(), loaded).expect("valid");
+    assert_eq!(next.run(&mut restarted), first);
+    assert_eq!(restarted.into_table(), consensus.into_table());
 }
