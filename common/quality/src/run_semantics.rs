@@ -2,7 +2,9 @@
 //! table with Gaussian counts from map.ply), mIoU / accuracy of label maps rendered from the
 //! map at held-out poses (frames that were not keyframes), and `miou_raw`: the segmenter's
 //! own per-keyframe label maps (segments/*.png) scored the same way. Both use one global
-//! one-to-one matching of labels to ground-truth instances over the sequence.
+//! one-to-one matching of labels to ground-truth instances over the sequence. A segmenter that
+//! draws fresh ids every frame (SAM, `geometry`) cannot score there, so `miou_raw_per_frame`
+//! scores each keyframe map with a matching of its own (as `opengs bench segment --quality`).
 
 use std::collections::BTreeSet;
 use std::path::Path;
@@ -11,6 +13,7 @@ use image::{ImageBuffer, Rgb};
 use opengs_datasets::{RgbdFrame, RgbdSource};
 use opengs_eval::RunDir;
 use opengs_eval::{read_label_png, read_tum_trajectory, LabelConfusion, SegmentationScore};
+use opengs_perception::quality::frame_quality;
 use opengs_semantics::GlobalLabelTable;
 use opengs_splat::{label_color, render, Camera, GaussianMap, RenderRequest, DEFAULT_NEAR};
 use serde::Serialize;
@@ -27,6 +30,8 @@ pub struct SemanticReport {
     pub map: Option<SegmentationScore>,
     /// The segmenter's per-keyframe label maps.
     pub raw: Option<SegmentationScore>,
+    /// The same maps, each matched to the truth on its own: mean per-frame mIoU.
+    pub raw_per_frame_miou: Option<f64>,
     /// Global labels in labels.json.
     pub labels: usize,
     /// Labels carried by at least one Gaussian of the final map.
@@ -52,10 +57,11 @@ pub fn evaluate_run_semantics(
     };
     let keyframes = read_keyframes(&run.keyframes())?;
     let map_score = score_map(run_dir, &map, source, every_n, &keyframes)?;
-    let raw = score_segments(&run.segments_dir(), source)?;
+    let (raw, raw_per_frame_miou) = score_segments(&run.segments_dir(), source)?;
     let report = SemanticReport {
         map: map_score,
         raw,
+        raw_per_frame_miou,
         labels,
         map_labels: counts.keys().filter(|&&l| l != 0).count(),
     };
@@ -73,6 +79,9 @@ pub fn evaluate_run_semantics(
         entries.insert("miou_raw".into(), s.miou.into());
         entries.insert("acc_raw".into(), s.acc.into());
         entries.insert("semantic_frames_raw".into(), s.frames.into());
+    }
+    if let Some(m) = report.raw_per_frame_miou {
+        entries.insert("miou_raw_per_frame".into(), m.into());
     }
     entries.insert("labels".into(), report.labels.into());
     entries.insert("map_labels".into(), report.map_labels.into());
@@ -166,12 +175,14 @@ fn score_map(
 }
 
 /// Scores the segmenter's saved label maps against the ground truth of their frames.
+/// The segmenter's keyframe maps: one matching over all of them, and the mean of a matching
+/// per map.
 fn score_segments(
     dir: &Path,
     source: &mut dyn RgbdSource,
-) -> anyhow::Result<Option<SegmentationScore>> {
+) -> anyhow::Result<(Option<SegmentationScore>, Option<f64>)> {
     let Ok(entries) = std::fs::read_dir(dir) else {
-        return Ok(None);
+        return Ok((None, None));
     };
     let mut files: Vec<(usize, std::path::PathBuf)> = entries
         .filter_map(|e| e.ok())
@@ -183,20 +194,29 @@ fn score_segments(
         .collect();
     files.sort();
     let mut confusion = LabelConfusion::new();
+    let mut per_frame = Vec::new();
     for (index, path) in files {
         if index >= source.len() {
             anyhow::bail!("{}: frame {index} is not in the dataset", path.display());
         }
         let frame = source.frame(index)?;
         let Some(truth) = truth_of(&frame) else {
-            return Ok(None);
+            return Ok((None, None));
         };
         let (_, _, predicted) = read_label_png(&path).map_err(|e| anyhow::anyhow!(e))?;
         confusion
             .add_frame(&predicted, &truth)
             .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+        // Instance ids are u16 in the datasets, so this never saturates.
+        let truth16: Vec<u16> = truth
+            .iter()
+            .map(|&t| u16::try_from(t).unwrap_or(u16::MAX))
+            .collect();
+        per_frame.extend(frame_quality(&predicted, &truth16).map(|q| q.miou));
     }
-    Ok(confusion.score())
+    let mean =
+        (!per_frame.is_empty()).then(|| per_frame.iter().sum::<f64>() / per_frame.len() as f64);
+    Ok((confusion.score(), mean))
 }
 
 /// Rendered labels | ground-truth instances, each colourised with the stable label colours.
