@@ -26,8 +26,11 @@ pub struct PixelRun {
 impl PixelRun {
     /// Only the Gaussians met at the run's pixels change.
     pub const SCOPE_PIXELS: u32 = 0;
-    /// Every Gaussian labelled `from` changes (a label absorbed whole).
+    /// Every Gaussian labelled `from` changes (a label absorbed whole) where it lies on the
+    /// surface of `to`.
     pub const SCOPE_LABEL: u32 = 1;
+    /// Every Gaussian labelled `from` changes, wherever it lies (a Whole merge).
+    pub const SCOPE_MERGED: u32 = 2;
 }
 
 /// A counter-pruning region (docs/METHOD.md §5.3): Gaussians labelled `label` (ℓr) in the top-K of
@@ -194,7 +197,7 @@ fn check_runs(parts: &ConsensusResult, n: usize) -> Result<(), SchemaError> {
     if parts
         .relabels
         .iter()
-        .any(|r| r.scope != PixelRun::SCOPE_PIXELS && r.scope != PixelRun::SCOPE_LABEL)
+        .any(|r| r.scope > PixelRun::SCOPE_MERGED)
     {
         return Err(SchemaError::Invalid("relabel run with an unknown scope"));
     }

@@ -44,10 +44,16 @@ pub enum Ablation {
     /// No fragment absorption (§5.5; not in the paper): a map label too small to be a Whole
     /// part of the segment around it keeps its label for good.
     NoFragmentAbsorb,
+    /// Whole merges relabel only the Gaussians the view meets (§5.5; the paper's reach): the
+    /// hidden rest of a merged part keeps its label.
+    NoWholeLabelMerge,
+    /// Every Partial part that beats ℓr takes a fresh label (§5.5; the paper's table), also one
+    /// that holds most of ℓr.
+    NoPartialKeeper,
 }
 
 impl Ablation {
-    pub const ALL: [Ablation; 7] = [
+    pub const ALL: [Ablation; 9] = [
         Self::NoCounterPruning,
         Self::NoConfidenceUpdate,
         Self::NoPartDecay,
@@ -55,6 +61,8 @@ impl Ablation {
         Self::NoUnmappedAbstain,
         Self::NoMajorityMatch,
         Self::NoFragmentAbsorb,
+        Self::NoWholeLabelMerge,
+        Self::NoPartialKeeper,
     ];
 
     pub fn as_str(&self) -> &'static str {
@@ -66,6 +74,8 @@ impl Ablation {
             Self::NoUnmappedAbstain => "no-unmapped-abstain",
             Self::NoMajorityMatch => "no-majority-match",
             Self::NoFragmentAbsorb => "no-fragment-absorb",
+            Self::NoWholeLabelMerge => "no-whole-label-merge",
+            Self::NoPartialKeeper => "no-partial-keeper",
         }
     }
 
@@ -78,6 +88,8 @@ impl Ablation {
             Self::NoUnmappedAbstain => config.unmapped_pixels_abstain = false,
             Self::NoMajorityMatch => config.majority_match = false,
             Self::NoFragmentAbsorb => config.absorb_fragments = false,
+            Self::NoWholeLabelMerge => config.merge_whole_labels = false,
+            Self::NoPartialKeeper => config.partial_majority_keeps = false,
         }
     }
 }
@@ -442,6 +454,7 @@ impl WireResult {
                     scope: match r.scope {
                         RelabelScope::Pixels => PixelRun::SCOPE_PIXELS,
                         RelabelScope::Label => PixelRun::SCOPE_LABEL,
+                        RelabelScope::Merged => PixelRun::SCOPE_MERGED,
                     },
                 }
             })

@@ -502,11 +502,11 @@ impl MapperStage {
                 from: r.from,
                 to: r.to,
                 pixels: pixels(r.offset, r.count),
-                // decode checked the scope is one of the two
-                scope: if r.scope == PixelRun::SCOPE_LABEL {
-                    RelabelScope::Label
-                } else {
-                    RelabelScope::Pixels
+                // decode checked the scope is one of the three
+                scope: match r.scope {
+                    PixelRun::SCOPE_LABEL => RelabelScope::Label,
+                    PixelRun::SCOPE_MERGED => RelabelScope::Merged,
+                    _ => RelabelScope::Pixels,
                 },
             })
             .collect();

@@ -122,9 +122,20 @@ impl Decisions {
                     .iter()
                     .map(|&s| (conf(e.conf_s, s), area(&e.overlap.input_area, s))),
             );
+            // A winning part that holds over half of ℓr's pixels keeps ℓr, the other winners split
+            // off: a fresh label for it would move only what this view meets, and the rest of
+            // the object (its hidden side) would stay behind as ℓr.
+            let keeper = parts
+                .iter()
+                .copied()
+                .filter(|&s| e.config.partial_majority_keeps && conf(e.conf_s, s) > cr)
+                .map(|s| (e.overlap.ratios(s, r).1, s))
+                .filter(|&(b, _)| b > 0.5)
+                .max_by(|x, y| x.0.total_cmp(&y.0))
+                .map(|(_, s)| s);
             for &s in parts {
                 // Map wins when C_r > C̄s; otherwise only parts with C_s > C_r split off.
-                if f64::from(cr) <= mean && conf(e.conf_s, s) > cr {
+                if f64::from(cr) <= mean && conf(e.conf_s, s) > cr && Some(s) != keeper {
                     split_from.insert(s, r);
                 } else {
                     d.targets
@@ -235,8 +246,21 @@ impl Decisions {
                 d.targets
                     .insert(s, (Relation::Whole, LabelTarget::Label(merged)));
                 d.merged.push((merged, conf(e.conf_s, s)));
-                // Region = all rendered pixels of the part, so the part's label leaves the view.
+                // Region = all rendered pixels of the part, so the part's label leaves the view;
+                // a part mostly in view leaves the map, hidden Gaussians too.
                 for &r in parts.iter().filter(|&&r| r != merged) {
+                    if e.config.merge_whole_labels
+                        && conf(e.completeness, r) >= e.config.absorb_min_completeness
+                    {
+                        d.relabels.push(RelabelInstruction {
+                            from: r,
+                            to: merged,
+                            pixels: Vec::new(),
+                            scope: RelabelScope::Merged,
+                        });
+                        d.absorbed.push(r);
+                        continue;
+                    }
                     d.rendered_regions.insert(r, d.relabels.len());
                     d.relabels.push(RelabelInstruction {
                         from: r,

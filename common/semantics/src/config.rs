@@ -51,6 +51,16 @@ pub struct ConsensusConfig {
     /// Keyframes in a row a label must be a fragment before it is absorbed; a Full or
     /// Majority match of its own in between starts the count again.
     pub absorb_after_views: u32,
+    /// A departure from the paper (§5.5): a Whole merge won by the input moves every Gaussian
+    /// of a part that is mostly in view (completeness ≥ `absorb_min_completeness`), hidden
+    /// ones too. Off, only those the view meets move, and the rest come back as the part's
+    /// label from the next side seen (a sofa in three labels after two merges).
+    pub merge_whole_labels: bool,
+    /// A departure from the paper (§5.5): of the Partial parts that beat ℓr, one that holds
+    /// over half of ℓr's rendered pixels keeps ℓr instead of taking a fresh label. Off, a
+    /// table seen whole but for a sliver takes a fresh label over the pixels of this view,
+    /// and its hidden side stays on the old one.
+    pub partial_majority_keeps: bool,
 }
 
 impl Default for ConsensusConfig {
@@ -71,6 +81,8 @@ impl Default for ConsensusConfig {
             absorb_fragments: true,
             absorb_min_completeness: 0.5,
             absorb_after_views: 3,
+            merge_whole_labels: true,
+            partial_majority_keeps: true,
         }
     }
 }

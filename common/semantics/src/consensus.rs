@@ -87,7 +87,7 @@ impl LabelConsensus {
         } else {
             BTreeSet::new()
         };
-        // Inside reads completeness where it is given, and does not require it.
+        // Inside and Whole merges read completeness where it is given, and do not require it.
         let in_view = if completeness.is_empty() {
             rendered.completeness
         } else {
@@ -97,7 +97,7 @@ impl LabelConsensus {
 
         let evidence = Evidence {
             config: &self.config,
-            completeness: &completeness,
+            completeness: in_view,
             matching: &matching,
             overlap: &overlap,
             conf_s: &conf_s,

@@ -45,7 +45,11 @@ pub enum RelabelScope {
     #[default]
     Pixels,
     /// Every one in the map: the label as a whole is absorbed (§5.5), hidden Gaussians too.
+    /// The mapper applies it only where the label lies on the surface of `to`.
     Label,
+    /// Every one in the map, wherever it lies: a Whole merge of a label mostly in view
+    /// (§5.5), whose parts need not share a surface (a chair's seat and back).
+    Merged,
 }
 
 /// Symmetric difference of a Full match's masks: look for Gaussians labelled `label` there (§5.3).
@@ -100,6 +104,7 @@ impl ConsensusOutput {
                 format!("relabel {} → {} ({} px)", r.from, r.to, r.pixels.len())
             }
             RelabelScope::Label => format!("absorb {} → {} (whole label)", r.from, r.to),
+            RelabelScope::Merged => format!("merge {} → {} (whole label)", r.from, r.to),
         }));
         parts.join("; ")
     }

@@ -30,7 +30,8 @@ pub fn validate_regions<'p>(
 }
 
 /// Applies relabel instructions in order: in each listed pixel's top-K (or, for
-/// [`RelabelScope::Label`], anywhere in the map) a Gaussian labelled `from` gets `to`.
+/// [`RelabelScope::Label`] and [`RelabelScope::Merged`], anywhere in the map) a Gaussian
+/// labelled `from` gets `to`.
 /// Validates everything first, so on error no label changed.
 /// Returns how many label writes happened.
 pub fn apply_relabels(
@@ -61,7 +62,10 @@ pub fn apply_relabels_centred(
         if instruction.from == instruction.to {
             continue;
         }
-        if instruction.scope == RelabelScope::Label {
+        if matches!(
+            instruction.scope,
+            RelabelScope::Label | RelabelScope::Merged
+        ) {
             for label in labels.iter_mut().filter(|l| **l == instruction.from) {
                 *label = instruction.to;
                 changed += 1;

@@ -87,6 +87,49 @@ fn partial_parts_win_get_new_labels_and_relabel_instructions() {
     assert_relative_eq!(conf(&consensus, 2), 0.8);
 }
 
+#[test]
+fn a_winning_part_that_holds_most_of_the_label_keeps_it() {
+    // Rendered 1 (C_r 0.5) is input 10 on rows 0..14 (b = 0.7, C_s 0.9) and input 11 on rows
+    // 14..20 (b = 0.3, C_s 0.8); both beat C_r. Part 10 holds most of 1 and keeps it, part
+    // 11 alone splits off: the Gaussians of 1 that this view does not meet stay with 10.
+    let mut scene = Scene::new(20, 20);
+    scene.rendered_rows(0..20, 1);
+    scene.input_rows(0..14, 10, 0.9).input_rows(14..20, 11, 0.8);
+    let mut consensus = consensus_with(&[0.5], config());
+    let out = scene.run(&mut consensus);
+    assert_eq!(out.target_of(10), Some(&LabelTarget::Label(1)));
+    assert_eq!(out.target_of(11), Some(&LabelTarget::Label(2)));
+    assert_eq!(
+        out.relabels,
+        vec![RelabelInstruction {
+            from: 1,
+            to: 2,
+            pixels: scene.rows(14..20),
+            scope: RelabelScope::Pixels,
+        }]
+    );
+    // Alone, such a part keeps the label: nothing splits.
+    let mut lone = Scene::new(20, 20);
+    lone.rendered_rows(0..20, 1).input_rows(0..14, 10, 0.9);
+    let mut consensus = consensus_with(&[0.5], config());
+    let out = lone.run(&mut consensus);
+    assert_eq!(out.assignments[0].relation, Relation::Partial);
+    assert_eq!(out.target_of(10), Some(&LabelTarget::Label(1)));
+    assert!(out.relabels.is_empty());
+    // Switched off (the paper's table): each winning part takes a fresh label.
+    let mut consensus = consensus_with(
+        &[0.5],
+        ConsensusConfig {
+            partial_majority_keeps: false,
+            ..config()
+        },
+    );
+    let out = scene.run(&mut consensus);
+    assert_eq!(out.target_of(10), Some(&LabelTarget::Label(2)));
+    assert_eq!(out.target_of(11), Some(&LabelTarget::Label(3)));
+    assert_eq!(out.relabels.len(), 2);
+}
+
 /// Input 20 covers the grid; rendered 1 rows 0..10 (C 0.4), rendered 2 rows 10..15 (C 0.5).
 fn whole_scene(cs: f32) -> Scene {
     let mut scene = Scene::new(20, 20);
@@ -98,8 +141,15 @@ fn whole_scene(cs: f32) -> Scene {
 #[test]
 fn whole_input_wins_merges_parts_into_largest() {
     // C̄r = (0.4·200 + 0.5·100)/300 = 0.433 < C_s = 0.6: parts merge into 1 (the largest).
+    // The paper's reach: only the Gaussians met at the part's pixels move.
     let scene = whole_scene(0.6);
-    let mut consensus = consensus_with(&[0.4, 0.5], config());
+    let mut consensus = consensus_with(
+        &[0.4, 0.5],
+        ConsensusConfig {
+            merge_whole_labels: false,
+            ..config()
+        },
+    );
     let out = scene.run(&mut consensus);
     assert_eq!(out.assignments[0].relation, Relation::Whole);
     assert_eq!(out.target_of(20), Some(&LabelTarget::Label(1)));
@@ -115,6 +165,49 @@ fn whole_input_wins_merges_parts_into_largest() {
     assert!(out.consistent_label_map.iter().all(|&l| l == 1));
     assert_relative_eq!(conf(&consensus, 1), 0.6); // merged label takes C_s
     assert_relative_eq!(conf(&consensus, 2), 0.44); // part decayed
+}
+
+#[test]
+fn a_whole_merge_moves_all_of_a_part_mostly_in_view() {
+    // As above, part 2 wholly in view: every Gaussian of 2 moves, hidden ones too, and 2
+    // leaves the table; merged from the view alone, the hidden rest would come back as 2 from
+    // the next side seen.
+    for (completeness, merged) in [(1.0, true), (0.5, true), (0.49, false)] {
+        let mut scene = whole_scene(0.6);
+        scene.completeness(2, completeness);
+        let mut consensus = consensus_with(&[0.4, 0.5], config());
+        let out = scene.run(&mut consensus);
+        assert_eq!(out.target_of(20), Some(&LabelTarget::Label(1)));
+        let expected = match merged {
+            true => RelabelInstruction {
+                from: 2,
+                to: 1,
+                pixels: Vec::new(),
+                scope: RelabelScope::Merged,
+            },
+            false => RelabelInstruction {
+                from: 2,
+                to: 1,
+                pixels: scene.rows(10..15),
+                scope: RelabelScope::Pixels,
+            },
+        };
+        assert_eq!(out.relabels, vec![expected], "completeness {completeness}");
+        assert_eq!(consensus.table().get(2).is_none(), merged);
+        assert!(out.consistent_label_map.iter().all(|&l| l == 1));
+    }
+    // Switched off, the paper's reach: the pixels only.
+    let scene = whole_scene(0.6);
+    let mut consensus = consensus_with(
+        &[0.4, 0.5],
+        ConsensusConfig {
+            merge_whole_labels: false,
+            ..config()
+        },
+    );
+    let out = scene.run(&mut consensus);
+    assert_eq!(out.relabels[0].scope, RelabelScope::Pixels);
+    assert_eq!(out.relabels[0].pixels, scene.rows(10..15));
 }
 
 #[test]
@@ -244,8 +337,8 @@ fn whole_merge_ties_go_to_smallest_part_id() {
         vec![RelabelInstruction {
             from: 3,
             to: 2,
-            pixels: scene.rows(0..5),
-            scope: RelabelScope::Pixels,
+            pixels: Vec::new(),
+            scope: RelabelScope::Merged,
         }]
     );
 }
