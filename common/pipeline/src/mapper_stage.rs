@@ -232,7 +232,8 @@ struct MapperStage {
 /// and the log says which.
 #[derive(Default)]
 struct SegmentsQueue {
-    waiting: BTreeMap<u64, SegmentsHeader>,
+    /// By seq, with the time each came.
+    waiting: BTreeMap<u64, (SegmentsHeader, Instant)>,
     /// Seqs rendered already: service history (a restarted segmenter or mapper) and a swap's
     /// two processes can hand the same segmentation over twice.
     rendered: VecDeque<u64>,
@@ -241,6 +242,9 @@ struct SegmentsQueue {
     /// render for its 5 s timeout), so only the newest of it is rendered.
     history: bool,
 }
+
+/// How long the newest segmentation may hold back older ones while its keyframe is not here.
+const AHEAD_PATIENCE: Duration = Duration::from_millis(250);
 
 /// Keyframes taken in one turn of the mapper's loop before it serves the semantic loop and
 /// takes one optimisation step.
@@ -263,7 +267,7 @@ impl SegmentsQueue {
             tracing::debug!("segments #{seq}: rendered for the consensus already");
             return;
         }
-        self.waiting.insert(seq, h);
+        self.waiting.insert(seq, (h, Instant::now()));
         while self.waiting.len() > MAX_WAITING_SEGMENTS {
             if let Some((old, _)) = self.waiting.pop_first() {
                 tracing::info!(
@@ -274,14 +278,35 @@ impl SegmentsQueue {
         }
     }
 
+    /// The next segmentation to render: the newest, once its keyframe is here (`newest_keyframe`
+    /// is the newest keyframe held). While the newest waits for its keyframe, nothing, unless
+    /// one has waited `patience`: the newest's keyframe is usually being mapped, and its labels
+    /// are the freshest. A mapper behind the segmenter (the edge deploy) would otherwise only
+    /// ever find segmentations ahead of its keyframes, and render none; then the newest that
+    /// can be rendered goes.
+    fn take_next(
+        &mut self,
+        newest_keyframe: Option<u64>,
+        patience: Duration,
+    ) -> Option<SegmentsHeader> {
+        let (&newest, _) = self.waiting.last_key_value()?;
+        let longest = self
+            .waiting
+            .values()
+            .map(|(_, since)| since.elapsed())
+            .max()?;
+        if newest_keyframe.is_none_or(|k| newest > k) && longest < patience {
+            return None;
+        }
+        self.take_newest_up_to(newest_keyframe)
+    }
+
     /// The newest waiting segmentation of a keyframe this mapper has had (seq at most
-    /// `newest_keyframe`). Newer ones wait for their keyframe, and do not hold back older ones
-    /// that can be rendered now: a mapper behind the segmenter (the edge deploy) would
-    /// otherwise only ever find segmentations ahead of its keyframes, and render none.
+    /// `newest_keyframe`); newer ones stay.
     fn take_newest_up_to(&mut self, newest_keyframe: Option<u64>) -> Option<SegmentsHeader> {
         let limit = newest_keyframe?;
         let seq = *self.waiting.range(..=limit).next_back()?.0;
-        let h = self.waiting.remove(&seq)?;
+        let (h, _) = self.waiting.remove(&seq)?;
         if std::mem::take(&mut self.history) {
             let older: Vec<u64> = self.waiting.range(..seq).map(|(&s, _)| s).collect();
             if !older.is_empty() {
@@ -307,7 +332,7 @@ impl SegmentsQueue {
     fn put_back(&mut self, h: SegmentsHeader) {
         let seq = h.stamp.seq;
         self.rendered.retain(|&s| s != seq);
-        self.waiting.insert(seq, h);
+        self.waiting.insert(seq, (h, Instant::now()));
     }
 
     fn was_rendered(&self, seq: u64) -> bool {
@@ -802,7 +827,7 @@ pub fn run_mapper(ctx: &RunContext, out_dir: &Path, args: &MapperArgs) -> anyhow
             .is_none_or(|(_, since)| since.elapsed() > CONSENSUS_TIMEOUT)
         {
             let newest = stage.newest_keyframe;
-            if let Some(h) = stage.waiting_segments.take_newest_up_to(newest) {
+            if let Some(h) = stage.waiting_segments.take_next(newest, AHEAD_PATIENCE) {
                 if !stage.handle_segments(&pool, &h)? {
                     stage.waiting_segments.put_back(h);
                 }
@@ -979,6 +1004,19 @@ mod tests {
         // Its keyframe came.
         assert_eq!(q.take_newest_up_to(Some(30)).map(|h| h.stamp.seq), Some(30));
         assert!(q.was_rendered(30) && q.was_rendered(20));
+        // The newest waits for its keyframe a while, holding back the others.
+        q.push(segments(50));
+        q.push(segments(60));
+        assert!(q.take_next(Some(50), Duration::from_secs(60)).is_none());
+        assert_eq!(
+            q.take_next(Some(50), Duration::ZERO).map(|h| h.stamp.seq),
+            Some(50)
+        );
+        assert_eq!(
+            q.take_next(Some(60), Duration::from_secs(60))
+                .map(|h| h.stamp.seq),
+            Some(60)
+        );
         // One given out that could not be rendered after all goes back, not counted rendered.
         q.push(segments(40));
         if let Some(h) = q.take_newest_up_to(Some(40)) {

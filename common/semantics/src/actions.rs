@@ -44,6 +44,30 @@ pub(crate) struct Decisions {
     pub refused: u32,
 }
 
+/// The winning Partial part of `r` that keeps `r`: one holding over half of its rendered
+/// pixels, when every other segment holding τ3 of `r` splits off. A fresh label for it would
+/// move only the Gaussians this view meets, and the object's hidden side would stay behind as
+/// `r`. Where another piece of `r` that stays (a book the map merged with the one in view)
+/// holds τ3 of it, the winner takes the fresh label as in the paper, so the two come apart.
+fn partial_keeper(e: &Evidence, r: u32, parts: &[u32], wins: &impl Fn(u32) -> bool) -> Option<u32> {
+    let keeper = parts
+        .iter()
+        .copied()
+        .filter(|&s| wins(s))
+        .map(|s| (e.overlap.ratios(s, r).1, s))
+        .filter(|&(b, _)| b > 0.5)
+        .max_by(|x, y| x.0.total_cmp(&y.0))
+        .map(|(_, s)| s)?;
+    let others_split = e
+        .overlap
+        .pairs
+        .keys()
+        .filter(|&&(s, rr)| rr == r && s != 0 && s != keeper)
+        .filter(|&&(s, _)| e.overlap.ratios(s, r).1 >= e.config.tau_min)
+        .all(|&(s, _)| parts.contains(&s) && wins(s));
+    others_split.then_some(keeper)
+}
+
 /// Σ c·n / Σ n (0 when the areas sum to 0).
 fn area_weighted_mean(items: impl Iterator<Item = (f32, u32)>) -> f64 {
     let (num, den) = items.fold((0.0, 0.0), |(num, den), (c, n)| {
@@ -122,20 +146,15 @@ impl Decisions {
                     .iter()
                     .map(|&s| (conf(e.conf_s, s), area(&e.overlap.input_area, s))),
             );
-            // A winning part that holds over half of ℓr's pixels keeps ℓr, the other winners split
-            // off: a fresh label for it would move only what this view meets, and the rest of
-            // the object (its hidden side) would stay behind as ℓr.
-            let keeper = parts
-                .iter()
-                .copied()
-                .filter(|&s| e.config.partial_majority_keeps && conf(e.conf_s, s) > cr)
-                .map(|s| (e.overlap.ratios(s, r).1, s))
-                .filter(|&(b, _)| b > 0.5)
-                .max_by(|x, y| x.0.total_cmp(&y.0))
-                .map(|(_, s)| s);
+            let wins = |s: u32| f64::from(cr) <= mean && conf(e.conf_s, s) > cr;
+            let keeper = e
+                .config
+                .partial_majority_keeps
+                .then(|| partial_keeper(e, r, parts, &wins))
+                .flatten();
             for &s in parts {
                 // Map wins when C_r > C̄s; otherwise only parts with C_s > C_r split off.
-                if f64::from(cr) <= mean && conf(e.conf_s, s) > cr && Some(s) != keeper {
+                if wins(s) && Some(s) != keeper {
                     split_from.insert(s, r);
                 } else {
                     d.targets

@@ -116,6 +116,26 @@ fn a_winning_part_that_holds_most_of_the_label_keeps_it() {
     assert_eq!(out.assignments[0].relation, Relation::Partial);
     assert_eq!(out.target_of(10), Some(&LabelTarget::Label(1)));
     assert!(out.relabels.is_empty());
+    // Another piece that stays on 1 (C_s 0.3 < C_r) holds τ3 of it: two objects the map
+    // merged. The winner takes a fresh label as in the paper, so they come apart.
+    let mut merged = Scene::new(20, 20);
+    merged.rendered_rows(0..20, 1);
+    merged
+        .input_rows(0..14, 10, 0.9)
+        .input_rows(14..20, 11, 0.3);
+    let mut consensus = consensus_with(&[0.5], config());
+    let out = merged.run(&mut consensus);
+    assert_eq!(out.target_of(10), Some(&LabelTarget::Label(2)));
+    assert_eq!(out.target_of(11), Some(&LabelTarget::Label(1)));
+    assert_eq!(
+        out.relabels,
+        vec![RelabelInstruction {
+            from: 1,
+            to: 2,
+            pixels: merged.rows(0..14),
+            scope: RelabelScope::Pixels,
+        }]
+    );
     // Switched off (the paper's table): each winning part takes a fresh label.
     let mut consensus = consensus_with(
         &[0.5],
