@@ -232,8 +232,7 @@ struct MapperStage {
 /// and the log says which.
 #[derive(Default)]
 struct SegmentsQueue {
-    /// By seq, with the time each came.
-    waiting: BTreeMap<u64, (SegmentsHeader, Instant)>,
+    waiting: BTreeMap<u64, SegmentsHeader>,
     /// Seqs rendered already: service history (a restarted segmenter or mapper) and a swap's
     /// two processes can hand the same segmentation over twice.
     rendered: VecDeque<u64>,
@@ -242,13 +241,6 @@ struct SegmentsQueue {
     /// render for its 5 s timeout), so only the newest of it is rendered.
     history: bool,
 }
-
-/// How long the newest segmentation may hold back older ones while its keyframe is not here.
-const AHEAD_PATIENCE: Duration = Duration::from_millis(250);
-
-/// Keyframes taken in one turn of the mapper's loop before it serves the semantic loop and
-/// takes one optimisation step.
-const KEYFRAMES_PER_TURN: usize = 2;
 
 /// Segmentations waiting for a render (a keyframe a second at most, on a slow segmenter).
 const MAX_WAITING_SEGMENTS: usize = 8;
@@ -267,7 +259,7 @@ impl SegmentsQueue {
             tracing::debug!("segments #{seq}: rendered for the consensus already");
             return;
         }
-        self.waiting.insert(seq, (h, Instant::now()));
+        self.waiting.insert(seq, h);
         while self.waiting.len() > MAX_WAITING_SEGMENTS {
             if let Some((old, _)) = self.waiting.pop_first() {
                 tracing::info!(
@@ -278,44 +270,15 @@ impl SegmentsQueue {
         }
     }
 
-    /// The next segmentation to render: the newest, once its keyframe is here (`newest_keyframe`
-    /// is the newest keyframe held). While the newest waits for its keyframe, nothing, unless
-    /// one has waited `patience`: the newest's keyframe is usually being mapped, and its labels
-    /// are the freshest. A mapper behind the segmenter (the edge deploy) would otherwise only
-    /// ever find segmentations ahead of its keyframes, and render none; then the newest that
-    /// can be rendered goes.
-    fn take_next(
-        &mut self,
-        newest_keyframe: Option<u64>,
-        patience: Duration,
-    ) -> Option<SegmentsHeader> {
-        let (&newest, _) = self.waiting.last_key_value()?;
-        let longest = self
-            .waiting
-            .values()
-            .map(|(_, since)| since.elapsed())
-            .max()?;
-        if newest_keyframe.is_none_or(|k| newest > k) && longest < patience {
-            return None;
-        }
-        self.take_newest_up_to(newest_keyframe)
-    }
-
-    /// The newest waiting segmentation of a keyframe this mapper has had (seq at most
-    /// `newest_keyframe`); newer ones stay.
-    fn take_newest_up_to(&mut self, newest_keyframe: Option<u64>) -> Option<SegmentsHeader> {
-        let limit = newest_keyframe?;
-        let seq = *self.waiting.range(..=limit).next_back()?.0;
-        let (h, _) = self.waiting.remove(&seq)?;
-        if std::mem::take(&mut self.history) {
-            let older: Vec<u64> = self.waiting.range(..seq).map(|(&s, _)| s).collect();
-            if !older.is_empty() {
-                tracing::info!(
-                    "restarted: segmentations {older:?} (service history, before the restart) \
-                     dropped; #{seq}, the newest, rendered"
-                );
-                self.waiting.retain(|&s, _| s > seq);
-            }
+    fn take_newest(&mut self) -> Option<SegmentsHeader> {
+        let (seq, h) = self.waiting.pop_last()?;
+        if std::mem::take(&mut self.history) && !self.waiting.is_empty() {
+            tracing::info!(
+                "restarted: segmentations {:?} (service history, before the restart) dropped; \
+                 #{seq}, the newest, rendered",
+                self.waiting.keys().collect::<Vec<_>>()
+            );
+            self.waiting.clear();
         }
         self.rendered.push_back(seq);
         if self.rendered.len() > 64 {
@@ -328,11 +291,11 @@ impl SegmentsQueue {
         self.waiting.is_empty()
     }
 
-    /// A segmentation [`Self::take_newest_up_to`] gave out that could not be rendered yet.
+    /// A segmentation [`Self::take_newest`] gave out that could not be rendered yet.
     fn put_back(&mut self, h: SegmentsHeader) {
         let seq = h.stamp.seq;
         self.rendered.retain(|&s| s != seq);
-        self.waiting.insert(seq, (h, Instant::now()));
+        self.waiting.insert(seq, h);
     }
 
     fn was_rendered(&self, seq: u64) -> bool {
@@ -403,21 +366,13 @@ impl MapperStage {
 
     /// Densifies every waiting keyframe (a backlog in one go) and sends the tracker one
     /// target; true when there was any.
-    /// Takes the waiting keyframes, at most `limit` of them (the rest stay in the service for
-    /// the next turn); says whether it took any.
     fn take_keyframes(
         &mut self,
         pool: &rayon::ThreadPool,
         keyframes: &Inlet<KeyframeHeader>,
-        limit: usize,
     ) -> anyhow::Result<bool> {
         let mut newest = None;
-        let mut taken = 0;
-        while taken < limit {
-            let Some(sample) = keyframes.receive()? else {
-                break;
-            };
-            taken += 1;
+        while let Some(sample) = keyframes.receive()? {
             let seq = sample.user_header().stamp.seq;
             if self.restored_seqs.contains(&seq) {
                 tracing::debug!("keyframe #{seq} (service history): back from the journal already");
@@ -761,9 +716,7 @@ pub fn run_mapper(ctx: &RunContext, out_dir: &Path, args: &MapperArgs) -> anyhow
         // ready, since at the end of data ready is followed by the finish signal at once.
         let started = Instant::now();
         let missed = stage.mapper.keyframes();
-        while started.elapsed() < HISTORY_WAIT
-            && !stage.take_keyframes(&pool, &keyframes, usize::MAX)?
-        {
+        while started.elapsed() < HISTORY_WAIT && !stage.take_keyframes(&pool, &keyframes)? {
             std::thread::sleep(Duration::from_millis(20));
         }
         tracing::warn!(
@@ -807,14 +760,7 @@ pub fn run_mapper(ctx: &RunContext, out_dir: &Path, args: &MapperArgs) -> anyhow
         keyframes.clear_wakeups();
         segments.clear_wakeups();
         consensus.clear_wakeups();
-        // A mapper that cannot keep up with the keyframes (the edge deploy's idle-scheduled
-        // mapper beside a 30 Hz sensor) still renders for the consensus between them; at the
-        // end of data every keyframe is taken first.
-        let limit = match finish.load(Ordering::Relaxed) {
-            true => usize::MAX,
-            false => KEYFRAMES_PER_TURN,
-        };
-        stage.take_keyframes(&pool, &keyframes, limit)?;
+        stage.take_keyframes(&pool, &keyframes)?;
         while let Some(sample) = consensus.receive()? {
             stage.handle_consensus(sample.user_header(), sample.payload());
         }
@@ -826,8 +772,7 @@ pub fn run_mapper(ctx: &RunContext, out_dir: &Path, args: &MapperArgs) -> anyhow
             .outstanding
             .is_none_or(|(_, since)| since.elapsed() > CONSENSUS_TIMEOUT)
         {
-            let newest = stage.newest_keyframe;
-            if let Some(h) = stage.waiting_segments.take_next(newest, AHEAD_PATIENCE) {
+            if let Some(h) = stage.waiting_segments.take_newest() {
                 if !stage.handle_segments(&pool, &h)? {
                     stage.waiting_segments.put_back(h);
                 }
@@ -981,49 +926,29 @@ mod tests {
         for seq in [12, 10, 11] {
             q.push(segments(seq));
         }
-        let first = q.take_newest_up_to(Some(12)).map(|h| h.stamp.seq);
+        let first = q.take_newest().map(|h| h.stamp.seq);
         // 12 again (a restarted segmenter's service history): rendered already, ignored.
         q.push(segments(12));
-        let rest: Vec<u64> =
-            std::iter::from_fn(|| q.take_newest_up_to(Some(12)).map(|h| h.stamp.seq)).collect();
+        let rest: Vec<u64> = std::iter::from_fn(|| q.take_newest().map(|h| h.stamp.seq)).collect();
         assert_eq!((first, rest), (Some(12), vec![11, 10]));
         assert!(q.is_empty());
     }
 
     #[test]
-    fn a_segmentation_ahead_of_its_keyframe_waits_and_older_ones_go_first() {
+    fn a_segmentation_ahead_of_its_keyframe_waits_and_is_rendered_later() {
         let mut q = SegmentsQueue::default();
-        // No keyframe yet: nothing can be rendered.
         q.push(segments(30));
-        assert!(q.take_newest_up_to(None).is_none());
-        // The mapper has keyframes up to 20: 30 waits, 20 is rendered.
-        q.push(segments(20));
-        assert_eq!(q.take_newest_up_to(Some(20)).map(|h| h.stamp.seq), Some(20));
-        assert!(q.take_newest_up_to(Some(20)).is_none());
-        assert!(!q.was_rendered(30));
-        // Its keyframe came.
-        assert_eq!(q.take_newest_up_to(Some(30)).map(|h| h.stamp.seq), Some(30));
-        assert!(q.was_rendered(30) && q.was_rendered(20));
-        // The newest waits for its keyframe a while, holding back the others.
-        q.push(segments(50));
-        q.push(segments(60));
-        assert!(q.take_next(Some(50), Duration::from_secs(60)).is_none());
-        assert_eq!(
-            q.take_next(Some(50), Duration::ZERO).map(|h| h.stamp.seq),
-            Some(50)
-        );
-        assert_eq!(
-            q.take_next(Some(60), Duration::from_secs(60))
-                .map(|h| h.stamp.seq),
-            Some(60)
-        );
-        // One given out that could not be rendered after all goes back, not counted rendered.
-        q.push(segments(40));
-        if let Some(h) = q.take_newest_up_to(Some(40)) {
+        let early = q.take_newest();
+        assert!(q.was_rendered(30));
+        // Its keyframe has not come: back in the queue, no longer counted as rendered.
+        if let Some(h) = early {
             q.put_back(h);
         }
-        assert!(!q.was_rendered(40));
-        assert_eq!(q.take_newest_up_to(Some(40)).map(|h| h.stamp.seq), Some(40));
+        assert!(!q.was_rendered(30));
+        q.push(segments(20));
+        let order: Vec<u64> = std::iter::from_fn(|| q.take_newest().map(|h| h.stamp.seq)).collect();
+        assert_eq!(order, [30, 20]);
+        assert!(q.was_rendered(30) && q.was_rendered(20));
     }
 
     #[test]
@@ -1032,18 +957,13 @@ mod tests {
         for seq in [40, 50, 60, 70] {
             q.push(segments(seq));
         }
-        q.push(segments(80));
-        assert_eq!(q.take_newest_up_to(Some(70)).map(|h| h.stamp.seq), Some(70));
-        // 80 is ahead of the keyframes and stays.
-        assert_eq!(
-            q.waiting.keys().copied().collect::<Vec<_>>(),
-            [80],
-            "40, 50, 60 dropped"
-        );
+        assert_eq!(q.take_newest().map(|h| h.stamp.seq), Some(70));
+        assert!(q.is_empty(), "40, 50, 60 dropped");
         // From then on, out of order as usual.
-        q.push(segments(90));
-        let rest: Vec<u64> =
-            std::iter::from_fn(|| q.take_newest_up_to(Some(90)).map(|h| h.stamp.seq)).collect();
+        for seq in [90, 80] {
+            q.push(segments(seq));
+        }
+        let rest: Vec<u64> = std::iter::from_fn(|| q.take_newest().map(|h| h.stamp.seq)).collect();
         assert_eq!(rest, [90, 80]);
     }
 
@@ -1053,9 +973,7 @@ mod tests {
         for seq in 100..100 + MAX_WAITING_SEGMENTS as u64 + 2 {
             q.push(segments(seq));
         }
-        let all: Vec<u64> =
-            std::iter::from_fn(|| q.take_newest_up_to(Some(u64::MAX)).map(|h| h.stamp.seq))
-                .collect();
+        let all: Vec<u64> = std::iter::from_fn(|| q.take_newest().map(|h| h.stamp.seq)).collect();
         let expected: Vec<u64> = (102..100 + MAX_WAITING_SEGMENTS as u64 + 2).rev().collect();
         assert_eq!(all, expected, "100 and 101 dropped as stale");
     }
