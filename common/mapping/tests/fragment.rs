@@ -88,10 +88,11 @@ fn the_host_plane_follows_the_gaussians_rotation() {
     assert!(lies_on_host(&map, 2, 1));
 }
 
-#[test]
-fn the_mapper_absorbs_a_strip_whole_and_keeps_a_label_standing_off_its_host() {
+/// The floor strip (2) and the cup (3) relabelled to the floor (1) with `scope`, seen by a
+/// camera 1 m above the floor: how many moved, which were kept back, the labels' sizes after.
+fn relabel_strip_and_cup(scope: RelabelScope) -> (usize, Vec<u32>, [Option<u32>; 3]) {
     let mut m = Mapper::with_map(MapperConfig::default(), floor_strip_and_cup());
-    // The camera 1 m above the floor, looking down at it (+z of the camera is −z of the world).
+    // Looking down at the floor (+z of the camera is −z of the world).
     let pose = Pose::from_parts(
         nalgebra::Translation3::new(0.25, 0.25, 1.0),
         nalgebra::UnitQuaternion::from_axis_angle(
@@ -106,7 +107,7 @@ fn the_mapper_absorbs_a_strip_whole_and_keeps_a_label_standing_off_its_host() {
         from,
         to: 1,
         pixels: Vec::new(),
-        scope: RelabelScope::Label,
+        scope,
     });
     let done = m
         .apply_consensus(&ConsensusUpdate {
@@ -117,50 +118,27 @@ fn the_mapper_absorbs_a_strip_whole_and_keeps_a_label_standing_off_its_host() {
             counter_prune_scale: 0.1,
         })
         .expect("valid update");
-    assert_eq!(done.relabelled, 6);
-    assert_eq!(done.kept_off_host, vec![3]);
     let counts = m.map().count_per_label();
-    assert_eq!(
-        (counts.get(&1), counts.get(&2), counts.get(&3)),
-        (Some(&106), None, Some(&6))
-    );
+    let count = |l: u32| counts.get(&l).copied();
+    (
+        done.relabelled,
+        done.kept_off_host,
+        [count(1), count(2), count(3)],
+    )
+}
+
+#[test]
+fn the_mapper_absorbs_a_strip_whole_and_keeps_a_label_standing_off_its_host() {
+    let (relabelled, kept, counts) = relabel_strip_and_cup(RelabelScope::Label);
+    assert_eq!((relabelled, kept), (6, vec![3]));
+    assert_eq!(counts, [Some(106), None, Some(6)]);
 }
 
 #[test]
 fn a_whole_merge_moves_a_label_standing_off_the_surface_too() {
     // A Whole merge joins parts of one object that need not share a surface (a chair's seat
     // and back): no surface test, the cup standing 5 cm off the floor moves with the strip.
-    let mut m = Mapper::with_map(MapperConfig::default(), floor_strip_and_cup());
-    let pose = Pose::from_parts(
-        nalgebra::Translation3::new(0.25, 0.25, 1.0),
-        nalgebra::UnitQuaternion::from_axis_angle(
-            &nalgebra::Vector3::x_axis(),
-            std::f64::consts::PI,
-        ),
-    );
-    let camera = Camera::from_pose(Intrinsics::new(64.0, 64.0, 32.0, 32.0, 64, 64), &pose, 0.05);
-    m.render_for_consensus(7, &camera, 50);
-    let labels = vec![0u32; 64 * 64];
-    let relabels = [2, 3].map(|from| RelabelInstruction {
-        from,
-        to: 1,
-        pixels: Vec::new(),
-        scope: RelabelScope::Merged,
-    });
-    let done = m
-        .apply_consensus(&ConsensusUpdate {
-            seq: 7,
-            consistent_label_map: &labels,
-            relabels: &relabels,
-            counter_regions: &[],
-            counter_prune_scale: 0.1,
-        })
-        .expect("valid update");
-    assert_eq!(done.relabelled, 12);
-    assert!(done.kept_off_host.is_empty());
-    let counts = m.map().count_per_label();
-    assert_eq!(
-        (counts.get(&1), counts.get(&2), counts.get(&3)),
-        (Some(&112), None, None)
-    );
+    let (relabelled, kept, counts) = relabel_strip_and_cup(RelabelScope::Merged);
+    assert_eq!((relabelled, kept), (12, vec![]));
+    assert_eq!(counts, [Some(112), None, None]);
 }
