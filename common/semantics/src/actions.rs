@@ -68,6 +68,20 @@ fn partial_keeper(e: &Evidence, r: u32, parts: &[u32], wins: &impl Fn(u32) -> bo
     others_split.then_some(keeper)
 }
 
+impl Decisions {
+    /// Every Gaussian of `from` takes `to` (`scope`: absorbed or merged), and `from` leaves
+    /// the table.
+    fn move_whole_label(&mut self, from: u32, to: u32, scope: RelabelScope) {
+        self.relabels.push(RelabelInstruction {
+            from,
+            to,
+            pixels: Vec::new(),
+            scope,
+        });
+        self.absorbed.push(from);
+    }
+}
+
 /// Σ c·n / Σ n (0 when the areas sum to 0).
 fn area_weighted_mean(items: impl Iterator<Item = (f32, u32)>) -> f64 {
     let (num, den) = items.fold((0.0, 0.0), |(num, den), (c, n)| {
@@ -125,13 +139,7 @@ impl Decisions {
             if streak < e.config.absorb_after_views || conf(e.conf_s, s) <= conf(e.conf_r, r) {
                 d.kept_fragments.push(r);
             } else {
-                d.relabels.push(RelabelInstruction {
-                    from: r,
-                    to: t,
-                    pixels: Vec::new(),
-                    scope: RelabelScope::Label,
-                });
-                d.absorbed.push(r);
+                d.move_whole_label(r, t, RelabelScope::Label);
             }
         }
     }
@@ -271,13 +279,7 @@ impl Decisions {
                     if e.config.merge_whole_labels
                         && conf(e.completeness, r) >= e.config.absorb_min_completeness
                     {
-                        d.relabels.push(RelabelInstruction {
-                            from: r,
-                            to: merged,
-                            pixels: Vec::new(),
-                            scope: RelabelScope::Merged,
-                        });
-                        d.absorbed.push(r);
+                        d.move_whole_label(r, merged, RelabelScope::Merged);
                         continue;
                     }
                     d.rendered_regions.insert(r, d.relabels.len());
