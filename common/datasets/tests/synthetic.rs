@@ -237,3 +237,65 @@ fn open_dataset_synthetic_with_frame_limit() {
     assert!(f.gt_pose.is_some());
     assert!(!src.class_table().is_empty());
 }
+
+/// The +x wall seen head-on from 4 m, painted with vertical stripes (bands along y).
+fn striped_wall_view(frequency: f64, area_sampling: bool) -> Vec<u8> {
+    let mut scene = Scene::empty_room(Vector3::new(5.0, 4.0, 2.8));
+    scene.ambient = 1.0;
+    scene.diffuse = 0.0;
+    scene.area_sampling = area_sampling;
+    scene.room.faces[1].1 = Texture::Stripes {
+        axis: [0.0, 1.0, 0.0],
+        frequency,
+        a: [0.2, 0.2, 0.2],
+        b: [0.6, 0.6, 0.6],
+    };
+    let pose = look_at(
+        &Point3::new(1.0, 2.0, 1.4),
+        &Point3::new(5.0, 2.0, 1.4),
+        0.0,
+    );
+    render(&scene, &centred_camera(), &pose).rgb
+}
+
+#[test]
+fn area_sampling_averages_stripes_finer_than_a_pixel() {
+    // A pixel spans 4 m / 500 = 8 mm of the wall. At 1000 bands per metre a band is 0.5 mm
+    // and a pixel covers 16 of them. Area-sampled (4 × 4 jittered samples, each 51 or 153
+    // at random), a pixel is 51 + 102 · k / 16 with k ~ Binomial(16, ½): the mean grey
+    // (0.2 + 0.6) / 2 · 255 = 102 on average, ± 12.75 (one σ).
+    let area = striped_wall_view(1000.0, true);
+    let centre = (240 * 641 + 320) * 3;
+    let row: Vec<f64> = (centre..centre + 3 * 200)
+        .step_by(3)
+        .map(|px| area[px] as f64)
+        .collect();
+    let mean = row.iter().sum::<f64>() / row.len() as f64;
+    assert!((99.0..=105.0).contains(&mean), "mean {mean}");
+    let within_2_sigma = row.iter().filter(|g| (*g - 102.0).abs() <= 26.0).count();
+    assert!(within_2_sigma >= 180, "{within_2_sigma} of 200 within 2σ");
+    // Point-sampled, each pixel is one band: 51 or 153, the moiré no camera records.
+    let point = striped_wall_view(1000.0, false);
+    for px in (centre..centre + 3 * 200).step_by(3) {
+        assert!(
+            point[px] == 51 || point[px] == 153,
+            "pixel {}: {}",
+            px / 3,
+            point[px]
+        );
+    }
+}
+
+#[test]
+fn area_sampling_leaves_coarse_texture_alone() {
+    // Bands of 10 cm are 12.5 pixels wide: one sample per pixel, the same image.
+    assert_eq!(striped_wall_view(5.0, true), striped_wall_view(5.0, false));
+}
+
+#[test]
+fn the_reference_room_is_point_sampled_and_the_suite_area_sampled() {
+    assert!(!indoor_room().area_sampling);
+    let poses = [default_start_pose()];
+    let fitted = opengs_datasets::synthetic::scene_suite::room_around_trajectory(3, &poses);
+    assert!(fitted.scene.area_sampling);
+}

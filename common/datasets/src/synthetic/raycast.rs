@@ -1,5 +1,6 @@
 //! Ray-casting renderer: one primary ray per pixel, Lambertian shading,
-//! z-depth and instance labels. Rows run in parallel with rayon.
+//! z-depth and instance labels; colour optionally averaged over the pixel's
+//! footprint (`Scene::area_sampling`). Rows run in parallel with rayon.
 
 use nalgebra::{Point3, Vector3};
 use opengs_geometry::{Intrinsics, Pose};
@@ -75,6 +76,7 @@ pub fn render(scene: &Scene, k: &Intrinsics, pose: &Pose) -> RenderedView {
             // World ray direction is affine in u: row start + u · step.
             let row_start = rot * Vector3::new(-k.cx / k.fx, (v as f64 - k.cy) / k.fy, 1.0);
             let step = rot * Vector3::new(1.0 / k.fx, 0.0, 0.0);
+            let step_v = rot * Vector3::new(0.0, 1.0 / k.fy, 0.0);
             for u in 0..w {
                 let ui = u as i64;
                 let dir = row_start + step * u as f64;
@@ -86,7 +88,8 @@ pub fn render(scene: &Scene, k: &Intrinsics, pose: &Pose) -> RenderedView {
                     continue;
                 };
                 let p = origin + dir * hit.t;
-                let colour = shade(scene, &hit, &p, &dir);
+                let pixel = (v as u64) << 32 | u as u64;
+                let colour = shade(scene, &hit, &p, &dir, [&step, &step_v], pixel);
                 rgb_row[u * 3..u * 3 + 3].copy_from_slice(&colour);
                 // dir_cam.z = 1, so the ray parameter is the z-depth.
                 depth_row[u] = hit.t as f32;
@@ -207,8 +210,17 @@ fn room_hit<'a>(room: &'a Room, ray: &Ray) -> Option<SurfaceHit<'a>> {
     Some(face_hit(room, t_exit, face))
 }
 
-/// Lambertian shading with one point light plus ambient.
-fn shade(scene: &Scene, hit: &SurfaceHit, p: &Point3<f64>, dir: &Vector3<f64>) -> [u8; 3] {
+/// Lambertian shading with one point light plus ambient; `pixel_steps` are
+/// the ray direction's change per pixel in u and v, `pixel` seeds the jitter
+/// of area sampling.
+fn shade(
+    scene: &Scene,
+    hit: &SurfaceHit,
+    p: &Point3<f64>,
+    dir: &Vector3<f64>,
+    pixel_steps: [&Vector3<f64>; 2],
+    pixel: u64,
+) -> [u8; 3] {
     let mut n = hit.normal;
     if n.dot(dir) > 0.0 {
         n = -n;
@@ -217,9 +229,78 @@ fn shade(scene: &Scene, hit: &SurfaceHit, p: &Point3<f64>, dir: &Vector3<f64>) -
     let to_light = (scene.light - p).cast::<f32>();
     let lambert = (n.cast::<f32>().dot(&to_light) / to_light.norm()).max(0.0);
     let gain = scene.ambient + scene.diffuse * lambert;
-    let albedo = hit.texture.albedo(p);
+    let albedo = if scene.area_sampling {
+        pixel_albedo(hit, p, dir, pixel_steps, pixel)
+    } else {
+        hit.texture.albedo(p)
+    };
     // `as u8` saturates; +0.5 rounds without a libm call.
     albedo.map(|c| (c * gain * 255.0 + 0.5) as u8)
+}
+
+/// Most samples per pixel axis (16 per pixel) a fine texture gets.
+pub const MAX_PIXEL_SAMPLES: usize = 4;
+
+/// The albedo a camera pixel records: the texture averaged over the pixel's
+/// footprint on the surface, as a sensor integrates light over its area.
+/// One sample at `p` where the footprint is under half the texture's finest
+/// detail; otherwise an n × n grid over the footprint (n ≤
+/// `MAX_PIXEL_SAMPLES`), on the hit's tangent plane, so no ray is cast again.
+/// Each sample is jittered inside its cell (from `pixel`, so a pose always
+/// renders the same): a regular grid finer than the cap allows would fall on
+/// one phase of a periodic texture and alias again. Point-sampling fine
+/// stripes or wood rings at a distance draws moiré that no real camera
+/// records and no 3D map can reproduce from another view.
+pub fn pixel_albedo(
+    hit: &SurfaceHit,
+    p: &Point3<f64>,
+    dir: &Vector3<f64>,
+    pixel_steps: [&Vector3<f64>; 2],
+    pixel: u64,
+) -> [f32; 3] {
+    let feature = hit.texture.finest_feature_m();
+    if !feature.is_finite() {
+        return hit.texture.albedo(p);
+    }
+    // Surface displacement per pixel: d/dδ of the tangent-plane hit of
+    // dir + δ·step is t·(step − dir·(n·step)/(n·dir)).
+    let n_dir = hit.normal.dot(dir);
+    if n_dir.abs() < 1e-9 {
+        return hit.texture.albedo(p);
+    }
+    let axes = pixel_steps.map(|s| (s - dir * (hit.normal.dot(s) / n_dir)) * hit.t);
+    let footprint = axes[0].norm().max(axes[1].norm());
+    let n = ((2.0 * footprint / feature).ceil() as usize).clamp(1, MAX_PIXEL_SAMPLES);
+    if n == 1 {
+        return hit.texture.albedo(p);
+    }
+    let mut sum = [0.0f32; 3];
+    let mut state = pixel.wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ 0xD1B5_4A32_D192_ED03;
+    let mut jitter = || {
+        state = splitmix64(&mut state);
+        (state >> 11) as f64 / (1u64 << 53) as f64
+    };
+    for i in 0..n {
+        for j in 0..n {
+            let du = (i as f64 + jitter()) / n as f64 - 0.5;
+            let dv = (j as f64 + jitter()) / n as f64 - 0.5;
+            let c = hit.texture.albedo(&(p + axes[0] * du + axes[1] * dv));
+            for (s, c) in sum.iter_mut().zip(c) {
+                *s += c;
+            }
+        }
+    }
+    let inv = 1.0 / (n * n) as f32;
+    sum.map(|s| s * inv)
+}
+
+/// One step of SplitMix64 (Steele et al. 2014): a cheap, well-mixed jitter stream.
+fn splitmix64(state: &mut u64) -> u64 {
+    *state = state.wrapping_add(0x9E37_79B9_7F4A_7C15);
+    let mut z = *state;
+    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    z ^ (z >> 31)
 }
 
 /// Conservative pixel rectangle of a part's bounding box clipped to the

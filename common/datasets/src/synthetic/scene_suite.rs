@@ -1258,6 +1258,7 @@ fn furnished(
         light,
         ambient: ambient as f32,
         diffuse: diffuse as f32,
+        area_sampling: true,
     }
 }
 

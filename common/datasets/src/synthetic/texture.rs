@@ -51,6 +51,26 @@ pub enum Texture {
 }
 
 impl Texture {
+    /// Width (m) of the finest detail the texture draws: a band, a cell, a
+    /// mortar line, the second noise octave's lattice. A camera pixel whose
+    /// footprint is wider than half of it must average several samples
+    /// (`raycast::pixel_albedo`). Infinite for a solid colour.
+    pub fn finest_feature_m(&self) -> f64 {
+        match *self {
+            Texture::Solid(_) => f64::INFINITY,
+            Texture::Checker { frequency, .. } => 1.0 / frequency,
+            Texture::Stripes { frequency, .. } => 0.5 / frequency,
+            Texture::Noise { scale, .. } => 1.0 / (2.7 * scale),
+            // A quarter ring: the ring profile's ramps and its flat band.
+            Texture::Wood { rings, .. } => 0.25 / rings,
+            Texture::Bricks {
+                columns_per_m,
+                rows_per_m,
+                ..
+            } => (0.08 / rows_per_m).min(0.04 / columns_per_m),
+        }
+    }
+
     /// Surface colour (linear 0..1) at world point `p`.
     pub fn albedo(&self, p: &Point3<f64>) -> Rgb {
         match *self {

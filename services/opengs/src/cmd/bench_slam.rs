@@ -364,7 +364,9 @@ fn dataset(
     );
     let dir = root.join("data").join(name);
     let marker = dir.join("complete");
-    if !marker.exists() {
+    // A folder of an older generator (before area-sampled colour) is written again.
+    let current = std::fs::read_to_string(&marker).is_ok_and(|m| m.trim() == GENERATOR);
+    if !current {
         eprintln!(
             "writing {} frames of scene {} to {}",
             source.len(),
@@ -374,10 +376,14 @@ fn dataset(
         let _ = std::fs::remove_dir_all(&dir);
         write_dataset(&mut source, &dir, DatasetFormat::Tum, &mut |_, _| {})
             .with_context(|| format!("writing {}", dir.display()))?;
-        std::fs::write(&marker, "").with_context(|| format!("writing {}", marker.display()))?;
+        std::fs::write(&marker, GENERATOR)
+            .with_context(|| format!("writing {}", marker.display()))?;
     }
     Ok((dir, source.len(), teleport_frame))
 }
+
+/// What a dataset folder's `complete` marker holds: the frames it was written with.
+const GENERATOR: &str = "opengs synthetic generator 2: area-sampled colour";
 
 fn run_case(
     case: &Case,
