@@ -275,9 +275,9 @@ pub fn pixel_albedo(
         return hit.texture.albedo(p);
     }
     let mut sum = [0.0f32; 3];
-    let mut state = pixel.wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ 0xD1B5_4A32_D192_ED03;
+    let mut state = pixel.wrapping_mul(GOLDEN_GAMMA) ^ 0xD1B5_4A32_D192_ED03;
     let mut jitter = || {
-        state = splitmix64(&mut state);
+        state = mix64(state.wrapping_add(GOLDEN_GAMMA));
         (state >> 11) as f64 / (1u64 << 53) as f64
     };
     for i in 0..n {
@@ -294,10 +294,12 @@ pub fn pixel_albedo(
     sum.map(|s| s * inv)
 }
 
-/// One step of SplitMix64 (Steele et al. 2014): a cheap, well-mixed jitter stream.
-fn splitmix64(state: &mut u64) -> u64 {
-    *state = state.wrapping_add(0x9E37_79B9_7F4A_7C15);
-    let mut z = *state;
+/// SplitMix64's increment (2^64 / φ).
+const GOLDEN_GAMMA: u64 = 0x9E37_79B9_7F4A_7C15;
+
+/// SplitMix64's finaliser (Steele et al. 2014); chained on its own output plus
+/// the increment it makes a cheap, well-mixed jitter stream.
+fn mix64(mut z: u64) -> u64 {
     z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
     z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
     z ^ (z >> 31)
