@@ -47,7 +47,7 @@ pub struct RefineConfig {
     /// Five, not one every 250 steps: sharp texture edges need the small Gaussians, and
     /// at the final optimisation's 600 steps one round split a tenth of the map once
     /// (scene 1's loop: 24.8 dB with one round, 25.7 with three, 26.1 with five, 26.4
-    /// with ten at 1.6× the Gaussians and 1.4× the time).
+    /// with ten at 1.6× the Gaussians and 1.3× the time of five).
     pub split_rounds: usize,
     /// Fraction of the map split each time (those with the largest positional gradients).
     pub densify_fraction: f32,
