@@ -1,4 +1,4 @@
-//! Coarse-to-fine registration. The fine search (3 cm correspondences) only
+//! Coarse-to-fine registration. The fine search (2 cm correspondences) only
 //! converges from within a few centimetres of the answer; a camera that drops
 //! frames jumps 10 cm and 5° between two frames. So the source is first
 //! registered with wide correspondences against a coarse voxel grid of the
@@ -8,7 +8,7 @@
 //! stage   source          target           max correspondence
 //! 1       12 cm voxels    5 cm voxels      30 cm
 //! 2       6 cm voxels     5 cm voxels      10 cm
-//! 3       every point     every point      RegistrationConfig (3 cm TUM)
+//! 3       every point     every point      RegistrationConfig (2 cm)
 //! ```
 //!
 //! Measured on the synthetic room (`examples/jump_probe` of the tracking
@@ -241,7 +241,8 @@ mod tests {
         .expect("registers");
         let (cm, deg) = error_cm_deg(&r, &truth);
         assert!(cm < 0.5 && deg < 0.2, "{cm:.2} cm {deg:.2}°");
-        assert!(r.fitness > 0.8, "fitness {}", r.fitness);
+        // A fifth of the source sees what the target's two views never did.
+        assert!(r.fitness > 0.75, "fitness {}", r.fitness);
         // The fine search alone, from the same start, does not get there.
         let alone = register(&source, target.fine(), &Isometry3::identity(), &fine);
         let alone_cm = alone.map_or(f64::INFINITY, |r| error_cm_deg(&r, &truth).0);

@@ -203,7 +203,7 @@ fn overlap_fraction_on_a_hand_built_case() {
     // Target: a 10×10 grid (1 cm spacing) at z = 0. Source: the same grid,
     // but the last 3 of its 10 rows lifted by 5 cm, beyond √1e-3 ≈ 3.2 cm.
     // At the identity 70 of 100 points overlap; the solver must not move
-    // (a lifted point is also beyond the 3 cm correspondence radius).
+    // (a lifted point is also beyond the 2 cm correspondence radius).
     let grid = |lift_from_row: usize| -> Vec<Point3<f64>> {
         (0..100)
             .map(|i| {
@@ -318,4 +318,71 @@ fn registers_against_a_target_built_from_gaussians() {
     let (rot, trans) = errors(&truth, &result.transform);
     eprintln!("Gaussian target: {rot:.2e}°, {:.2e} mm", trans * 1e3);
     assert!(rot < 0.05 && trans < 1e-3, "{rot}°, {trans} m");
+}
+
+/// Points on an axis-aligned rectangle: `axis` is fixed at `at`, the two others run over
+/// `a` and `b` (start, end) in steps of `step`, shifted by `shift` steps.
+fn rectangle(
+    axis: usize,
+    at: f64,
+    a: (f64, f64),
+    b: (f64, f64),
+    step: f64,
+    shift: f64,
+) -> Vec<Point3<f64>> {
+    let (ia, ib) = ((axis + 1) % 3, (axis + 2) % 3);
+    let mut points = Vec::new();
+    let mut u = a.0 + shift * step;
+    while u < a.1 {
+        let mut v = b.0 + shift * step;
+        while v < b.1 {
+            let mut p = Point3::origin();
+            p[axis] = at;
+            p[ia] = u;
+            p[ib] = v;
+            points.push(p);
+            v += step;
+        }
+        u += step;
+    }
+    points
+}
+
+#[test]
+fn a_thin_boards_new_face_does_not_pull_the_registration() {
+    // A room (back wall, floor, side wall) and a 2.5 cm board standing on the floor. The
+    // model holds the board's face at x = 0 only; the frame, at the model's own pose, sees
+    // its other face at x = 2.5 cm from close by (dense), and not the first one. With
+    // correspondences up to 3 cm that face's points pair with the first face and pull
+    // the camera 2.5 cm along x against the side wall; 2 cm leaves them unpaired.
+    let room = |step: f64, shift: f64| {
+        let mut p = rectangle(2, 3.0, (-1.5, 1.5), (-1.0, 0.8), step, shift);
+        p.extend(rectangle(1, 0.8, (1.0, 3.0), (-1.5, 1.5), step, shift));
+        p.extend(rectangle(0, -1.5, (-1.0, 0.8), (1.0, 3.0), step, shift));
+        p
+    };
+    let board = |x: f64, shift: f64| rectangle(0, x, (0.3, 0.8), (1.0, 1.6), 0.01, shift);
+    let mut model = room(0.02, 0.0);
+    model.extend(board(0.0, 0.0));
+    let mut frame = room(0.02, 0.5);
+    frame.extend(board(0.025, 0.5));
+    let target =
+        Target::from_points(model, DEFAULT_NEIGHBOURS, Regularization::Plane).expect("k ≥ 3");
+    let source =
+        Cloud::with_covariances(frame, DEFAULT_NEIGHBOURS, Regularization::Plane).expect("k ≥ 3");
+    let slide = |max_correspondence_distance: f64| {
+        let config = RegistrationConfig {
+            max_correspondence_distance,
+            ..RegistrationConfig::tum()
+        };
+        let r = register(&source, &target, &Isometry3::identity(), &config).expect("registers");
+        r.transform.translation.vector.norm() * 100.0
+    };
+    let (tum, wide) = (
+        slide(RegistrationConfig::tum().max_correspondence_distance),
+        slide(0.03),
+    );
+    eprintln!("slide: {tum:.3} cm at the TUM setting, {wide:.3} cm at 3 cm");
+    assert!(tum < 0.1, "slid {tum:.3} cm");
+    assert!(wide > 1.0, "3 cm correspondences slid only {wide:.3} cm");
 }
