@@ -249,6 +249,10 @@ pub fn run(args: BenchSlamArgs) -> anyhow::Result<()> {
             ..row
         };
         println!("{}", format_row(&row));
+        // Said at once too, not only at the end: a full disk fails every later case.
+        if let Some(e) = &row.error {
+            eprintln!("case {} failed: {e}", row.case);
+        }
         rows.push(row);
     }
     let regular: Vec<&Row> = rows
