@@ -354,7 +354,7 @@ fn a_thin_boards_new_face_does_not_pull_the_registration() {
     // model holds the board's face at x = 0 only; the frame, at the model's own pose, sees
     // its other face at x = 2.5 cm from close by (dense), and not the first one. With
     // correspondences up to 3 cm that face's points pair with the first face and pull
-    // the camera 2.5 cm along x against the side wall; 2 cm leaves them unpaired.
+    // the camera along x against the side wall (1.1 cm here); 2 cm leaves them unpaired.
     let room = |step: f64, shift: f64| {
         let mut p = rectangle(2, 3.0, (-1.5, 1.5), (-1.0, 0.8), step, shift);
         p.extend(rectangle(1, 0.8, (1.0, 3.0), (-1.5, 1.5), step, shift));
