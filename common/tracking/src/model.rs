@@ -5,9 +5,9 @@
 //! keyframes' points alone), at two resolutions for coarse-to-fine
 //! registration. Building it (covariances, hash grids, kd-trees) takes tens
 //! of milliseconds for 100k Gaussians, several times a second at 30 Hz, so a
-//! [`ModelBuilder`] can do it on a thread of its own and hand each model over
-//! whole: the tracker never waits for one, it registers against the newest
-//! that is ready.
+//! [`ModelBuilder`] can do it on a thread of its own, on idle CPU time, and hand
+//! each model over whole: the tracker never waits for one, it registers against
+//! the newest that is ready.
 
 use std::sync::mpsc::{channel, Receiver, Sender, TryRecvError};
 use std::thread::JoinHandle;
@@ -148,6 +148,26 @@ impl ModelInputs {
     }
 }
 
+/// Puts the calling thread in Linux's `SCHED_IDLE` class: it runs only on CPU time nothing
+/// else wants. A build beside the frame being registered took half of a 2-core machine
+/// from it (the builder runs after every keyframe and map update); an older model for a
+/// few more frames costs nothing. Elsewhere the thread keeps its normal priority.
+fn run_on_idle_time() {
+    #[cfg(target_os = "linux")]
+    {
+        let param = libc::sched_param { sched_priority: 0 };
+        // SAFETY: pid 0 is the calling thread; `param` is a valid, initialised struct.
+        let rc = unsafe { libc::sched_setscheduler(0, libc::SCHED_IDLE, &param) };
+        if rc != 0 {
+            // Not fatal: the builder then competes with the tracker as before.
+            eprintln!(
+                "tracking-model thread: SCHED_IDLE refused ({})",
+                std::io::Error::last_os_error()
+            );
+        }
+    }
+}
+
 /// Builds models inline (deterministic: tests, offline tools) or on a thread.
 pub struct ModelBuilder {
     mode: Mode,
@@ -187,6 +207,7 @@ impl ModelBuilder {
         let thread = std::thread::Builder::new()
             .name("tracking-model".into())
             .spawn(move || {
+                run_on_idle_time();
                 let mut inputs = ModelInputs {
                     coarse_voxel,
                     ..ModelInputs::default()
@@ -368,5 +389,29 @@ mod tests {
             got = b.wait();
         }
         assert_eq!(got[0].as_ref().map(|m| m.map_seq()).ok(), Some(Some(2)));
+    }
+
+    #[cfg(target_os = "linux")]
+    #[test]
+    fn the_builder_thread_runs_on_idle_time_only() {
+        let mut b = ModelBuilder::background(0.05).expect("thread");
+        // Once it has built a model the thread has set its class.
+        b.add_keyframe(1, plane_cloud(0.0, 10));
+        assert!(b.wait()[0].is_ok());
+        let tasks = std::fs::read_dir("/proc/self/task").expect("/proc/self/task");
+        let tid = tasks
+            .filter_map(Result::ok)
+            .find(|t| {
+                std::fs::read_to_string(t.path().join("comm"))
+                    .is_ok_and(|c| c.trim() == "tracking-model")
+            })
+            .and_then(|t| t.file_name().to_str()?.parse::<libc::pid_t>().ok())
+            .expect("a thread named tracking-model");
+        // SAFETY: reads the scheduling policy of a thread of this process.
+        let policy = unsafe { libc::sched_getscheduler(tid) };
+        assert_eq!(policy, libc::SCHED_IDLE);
+        // The caller's thread keeps its class.
+        // SAFETY: pid 0 is the calling thread.
+        assert_eq!(unsafe { libc::sched_getscheduler(0) }, libc::SCHED_OTHER);
     }
 }
