@@ -187,6 +187,8 @@ pub struct FrameTracker {
     first_pose: Pose,
     frames: u64,
     last_keyframe: Option<u64>,
+    /// The newest keyframe whose points went to the builder.
+    pending_keyframe: Option<u64>,
     keyframe_poses: Vec<Pose>,
     lost: Option<LostSpell>,
     /// Time of the previous frame (s).
@@ -227,6 +229,27 @@ fn landing(offset: &Pose, kind: Attempt, config: &TrackerConfig) -> Landing {
     }
 }
 
+/// Whether a tracked frame is a keyframe: a tracking keyframe when its overlap with the
+/// model is below `keyframe_overlap`, a mapping keyframe every `keyframe_every` frames.
+/// While the model still lacks the last keyframe's points (`model_lags`: its build has not
+/// finished) a low overlap says only that, and makes no tracking keyframe: with the builder
+/// on idle CPU time the edge deploy's pinned tracker otherwise made one on frame after frame
+/// until the build came (scene 1's noisy loop, 600 frames: 66 → 94 keyframes).
+fn keyframe_kind(
+    overlap: f64,
+    since_keyframe: u64,
+    model_lags: bool,
+    config: &TrackerConfig,
+) -> Option<KeyframeKind> {
+    if overlap < config.keyframe_overlap && !model_lags {
+        Some(KeyframeKind::Tracking)
+    } else if since_keyframe >= config.keyframe_every {
+        Some(KeyframeKind::Mapping)
+    } else {
+        None
+    }
+}
+
 impl FrameTracker {
     /// A tracker that builds its models inline (deterministic; tests and offline tools).
     pub fn new(config: TrackerConfig) -> Self {
@@ -257,6 +280,7 @@ impl FrameTracker {
             first_pose: Pose::identity(),
             frames: 0,
             last_keyframe: None,
+            pending_keyframe: None,
             keyframe_poses: Vec::new(),
             lost: None,
             last_timestamp: f64::NAN,
@@ -747,19 +771,17 @@ impl FrameTracker {
         let pose = r.transform;
         self.motion.update(pose, timestamp);
         let since_keyframe = self.last_keyframe.map_or(u64::MAX, |k| index - k);
-        let keyframe = if r.overlap < self.config.keyframe_overlap {
-            Some(KeyframeKind::Tracking)
-        } else if since_keyframe >= self.config.keyframe_every {
-            Some(KeyframeKind::Mapping)
-        } else {
-            None
-        };
+        let model_lags = self
+            .pending_keyframe
+            .is_some_and(|k| !self.model.as_deref().is_some_and(|m| m.holds_keyframe(k)));
+        let keyframe = keyframe_kind(r.overlap, since_keyframe, model_lags, &self.config);
         if keyframe.is_some() {
             self.last_keyframe = Some(index);
             self.keyframe_poses.push(pose);
             let novel = self.novel_points(&cloud, &pose);
             if !novel.is_empty() {
                 self.builder.add_keyframe(index, novel);
+                self.pending_keyframe = Some(index);
             }
         }
         TrackOutcome {
@@ -888,6 +910,28 @@ mod tests {
         assert_eq!(landing(&at(0.8, 6.4), Attempt::Turned, &c), Landing::Near);
         assert_eq!(landing(&at(2.0, 0.5), Attempt::Turned, &c), Landing::Near);
         assert_eq!(landing(&at(3.0, 0.5), Attempt::Turned, &c), Landing::Slid);
+    }
+
+    #[test]
+    fn a_model_that_lacks_the_last_keyframe_makes_no_tracking_keyframe() {
+        let c = TrackerConfig::tum();
+        let low = c.keyframe_overlap - 0.1;
+        assert_eq!(
+            keyframe_kind(low, 3, false, &c),
+            Some(KeyframeKind::Tracking)
+        );
+        assert_eq!(keyframe_kind(low, 3, true, &c), None);
+        // The periodic keyframe comes whatever the model.
+        let every = c.keyframe_every;
+        assert_eq!(
+            keyframe_kind(low, every, true, &c),
+            Some(KeyframeKind::Mapping)
+        );
+        assert_eq!(
+            keyframe_kind(0.95, every, false, &c),
+            Some(KeyframeKind::Mapping)
+        );
+        assert_eq!(keyframe_kind(0.95, 3, false, &c), None);
     }
 
     #[test]

@@ -21,6 +21,8 @@ pub struct TrackingModel {
     map_seq: Option<u64>,
     /// Keyframe clouds added on top of the map part.
     keyframes: usize,
+    /// Seq of the newest keyframe whose points it holds (through the map or its own cloud).
+    newest_keyframe: Option<u64>,
 }
 
 impl TrackingModel {
@@ -34,6 +36,12 @@ impl TrackingModel {
 
     pub fn keyframes(&self) -> usize {
         self.keyframes
+    }
+
+    /// Whether the points of keyframe `seq` are in the model (in the map part, or a
+    /// keyframe cloud at least as new).
+    pub fn holds_keyframe(&self, seq: u64) -> bool {
+        self.newest_keyframe.is_some_and(|n| n >= seq)
     }
 
     pub fn len(&self) -> usize {
@@ -140,10 +148,12 @@ impl ModelInputs {
         }
         let target = CoarseToFineTarget::new(cloud, self.coarse_voxel);
         target.fine().check_registrable()?;
+        let map_seq = self.map.as_ref().map(|(s, _)| *s);
         Ok(TrackingModel {
             target,
-            map_seq: self.map.as_ref().map(|(s, _)| *s),
+            map_seq,
             keyframes: self.keyframes.len(),
+            newest_keyframe: self.keyframes.iter().map(|(s, _)| *s).chain(map_seq).max(),
         })
     }
 }
@@ -389,6 +399,20 @@ mod tests {
             got = b.wait();
         }
         assert_eq!(got[0].as_ref().map(|m| m.map_seq()).ok(), Some(Some(2)));
+    }
+
+    #[test]
+    fn a_model_holds_the_keyframes_of_its_map_and_its_own() {
+        let mut b = ModelBuilder::inline(0.05);
+        b.add_keyframe(5, plane_cloud(0.0, 10));
+        let model = b.finished().pop().expect("built").expect("model");
+        assert!(model.holds_keyframe(5) && model.holds_keyframe(0));
+        assert!(!model.holds_keyframe(6));
+        // A map as of keyframe 9 holds 6 to 9, and not 12.
+        b.set_map(9, gaussians(20), Regularization::default());
+        let model = b.finished().pop().expect("built").expect("model");
+        assert!(model.holds_keyframe(9) && model.holds_keyframe(6));
+        assert!(!model.holds_keyframe(12));
     }
 
     #[cfg(target_os = "linux")]
