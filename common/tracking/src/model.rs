@@ -161,7 +161,7 @@ impl ModelInputs {
 /// Puts the calling thread in Linux's `SCHED_IDLE` class: it runs only on CPU time nothing
 /// else wants. A build (after every keyframe and map update) beside the frame being
 /// registered slowed it: on 2 cores, frames near a keyframe took 52–66 ms through the
-/// pipeline against 26–33 ms alone. An older model for a few more frames costs nothing.
+/// pipeline and at most 33 ms alone. An older model for a few more frames costs nothing.
 /// Elsewhere the thread keeps its normal priority.
 fn run_on_idle_time() {
     #[cfg(target_os = "linux")]
