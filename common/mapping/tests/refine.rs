@@ -76,3 +76,44 @@ fn refinement_stops_when_the_caller_says_so() {
     assert_eq!(stats.gaussians_before, before);
     assert_eq!(stats.gaussians_after, map.len());
 }
+
+/// Gaussians three times too wide blur every edge; in a short refinement they must
+/// shrink back, which 3DGS's log-scale rate (0.005, paced for 30 000 steps) is too slow
+/// for and the refinement's own rate is not.
+#[test]
+fn a_short_refinement_shrinks_blurred_gaussians() {
+    let mut room = small_room();
+    let k = room.intrinsics();
+    let keyframes = posed(&mut room, &[0, 3, 6]);
+    let mut blurred = backproject(&keyframes[0].0, &keyframes[0].1, &k);
+    for s in &mut blurred.log_scales {
+        *s = s.map(|v| v + 3f32.ln());
+    }
+    let psnr_after = |lr_log_scale: f32| {
+        let mut map = blurred.clone();
+        let config = RefineConfig {
+            iters: 60,
+            downscale: false,
+            split_rounds: 0,
+            lr_log_scale,
+            ..RefineConfig::default()
+        };
+        refine(&mut map, &keyframes, k, &config, |_, _| {
+            ControlFlow::Continue(())
+        })
+        .expect("refines");
+        evaluate_render_quality(&map, keyframes.clone(), k, 1, None)
+            .expect("evaluates")
+            .psnr_db
+    };
+    let before = evaluate_render_quality(&blurred, keyframes.clone(), k, 1, None)
+        .expect("evaluates")
+        .psnr_db;
+    let (gs_rate, ours) = (
+        psnr_after(0.005),
+        psnr_after(RefineConfig::default().lr_log_scale),
+    );
+    println!("blurred {before:.2} dB → 3DGS rate {gs_rate:.2} dB, refinement's rate {ours:.2} dB");
+    // Measured 15.51 → 18.58 dB at 0.005, 19.87 dB at 0.025.
+    assert!(ours > gs_rate + 0.8, "{before} → {gs_rate} / {ours}");
+}
