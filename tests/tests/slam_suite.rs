@@ -26,6 +26,7 @@ fn quick_scene_suite_tracks_through_fr2_desk_gaps() {
         &std::fs::read_to_string(dir.path().join("bench_slam.json")).expect("bench_slam.json"),
     )
     .expect("json");
+    assert_eq!(json["deploy"], "desktop", "{json}");
     let rows = json["rows"].as_array().expect("rows");
     assert_eq!(rows.len(), 2, "{stdout}");
     for row in rows {
@@ -55,4 +56,24 @@ fn quick_scene_suite_tracks_through_fr2_desk_gaps() {
         .collect();
     let widest = stamps.windows(2).map(|w| w[1] - w[0]).fold(0.0, f64::max);
     assert!(widest > 0.25, "widest gap {widest} s");
+}
+
+#[test]
+fn a_broken_deploy_file_stops_the_bench_before_any_dataset_is_written() {
+    let dir = tempfile::tempdir().expect("tmp");
+    let deploy = dir.path().join("broken.toml");
+    std::fs::write(&deploy, "stages = 3\n").expect("write");
+    let root = dir.path().join("bench");
+    let out = Command::new(binary("opengs"))
+        .args(["bench", "slam", "--quick", "--deploy"])
+        .arg(&deploy)
+        .arg("--out-root")
+        .arg(&root)
+        .output()
+        .expect("opengs bench slam");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "{stderr}");
+    assert!(stderr.contains("--deploy"), "{stderr}");
+    assert!(stderr.contains("broken.toml"), "{stderr}");
+    assert!(!root.exists(), "{} was written", root.display());
 }

@@ -18,6 +18,7 @@ use opengs_datasets::{
 };
 use opengs_eval::RunDir;
 use opengs_pipeline::cli_values;
+use opengs_pipeline::deploy::DeployFile;
 use serde::{Deserialize, Serialize};
 
 /// The real TUM trajectories the paths follow (data/tum_trajectories, CC BY 4.0), compiled
@@ -84,6 +85,10 @@ pub struct BenchSlamArgs {
     /// Sensor rate cap of each run (frames/s) [default: the recorded 30 Hz].
     #[arg(long, value_parser = cli_values::rate)]
     max_rate: Option<f64>,
+    /// Deploy file of each run, as `opengs run --deploy`: a path, or `desktop` / `edge` for
+    /// the built-in ones (checked before any dataset is written).
+    #[arg(long, default_value = "desktop")]
+    deploy: PathBuf,
     /// Directory for the generated datasets (kept and reused), the runs and bench_slam.json.
     #[arg(long, default_value = "runs/bench_slam")]
     out_root: PathBuf,
@@ -205,6 +210,8 @@ pub fn run(args: BenchSlamArgs) -> anyhow::Result<()> {
             });
         }
     }
+    // A wrong deploy file would fail every case, after minutes of dataset writing.
+    DeployFile::load(&args.deploy).context("--deploy")?;
     let opengs = match &args.opengs {
         Some(p) => p.clone(),
         None => std::env::current_exe().context("locating the opengs binary")?,
@@ -215,7 +222,7 @@ pub fn run(args: BenchSlamArgs) -> anyhow::Result<()> {
     let load = std::fs::read_to_string("/proc/loadavg").unwrap_or_default();
     println!(
         "bench slam: {} cases ({} scenes × {} paths × {} noise settings{}), {frames} frames each, \
-         segmenter {}, finish steps {finish_steps}, {}; {}; loadavg {}",
+         segmenter {}, finish steps {finish_steps}, {}, deploy {}; {}; loadavg {}",
         cases.len(),
         scenes.len(),
         paths.len(),
@@ -230,6 +237,7 @@ pub fn run(args: BenchSlamArgs) -> anyhow::Result<()> {
             .map_or("as recorded (30 Hz, gaps kept)".to_string(), |r| format!(
                 "max rate {r} Hz"
             )),
+        args.deploy.display(),
         opengs.display(),
         load.trim()
     );
@@ -269,6 +277,7 @@ pub fn run(args: BenchSlamArgs) -> anyhow::Result<()> {
         "frames": frames,
         "finish_steps": finish_steps,
         "segmenter": args.segmenter,
+        "deploy": args.deploy,
         "opengs": opengs,
         "cases": cases,
         "rows": rows,
@@ -409,6 +418,8 @@ fn run_case(
         .arg(format!("tum:{}", data.display()))
         .args(["--segmenter", &args.segmenter])
         .args(["--finish-steps", &finish_steps.to_string()])
+        .arg("--deploy")
+        .arg(&args.deploy)
         .arg("--quiet")
         .arg("--out")
         .arg(&run_dir)
