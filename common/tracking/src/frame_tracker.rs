@@ -9,10 +9,10 @@
 //!
 //! Tracking: the fine registration from the constant-velocity prediction (when it
 //! slides more than 2.5 cm from it, again after turning the prediction about the camera
-//! centre); when one verifies but slid, fine restarts around it decide; after a gap of
-//! a quarter second (or when both fail), coarse-to-fine registration from the
-//! prediction and from the last verified pose, the best polished by the same
-//! restarts. Every result is verified against fitness, residual,
+//! centre); when one verifies but slid from a prediction with a velocity, fine restarts
+//! around it decide; after a gap of a quarter second (or when both fail, or slid from a
+//! prediction without a velocity), coarse-to-fine registration from the prediction and
+//! from the last verified pose, the best polished by the same restarts. Every result is verified against fitness, residual,
 //! conditioning, the motion prior and what the frame sees of the model
 //! (nothing in front of the measured depth). A frame that fails is lost: it
 //! is reported with the last verified pose and status `Lost`, makes no
@@ -475,8 +475,9 @@ impl FrameTracker {
     }
 
     /// Tracking. The fine registration from the prediction, when it verifies near the
-    /// prediction, is the answer; when it (and the turned attempt) verified but slid, it is
-    /// polished by restarts; after a gap (or when both fail) coarse-to-fine also runs from
+    /// prediction, is the answer; when it (and the turned attempt) verified but slid from a
+    /// prediction with a velocity, it is polished by restarts; after a gap (or when both
+    /// fail, or slid from a prediction without one) coarse-to-fine also runs from
     /// the prediction (and from the last verified pose when that finds nothing), the
     /// verified answer with the best fitness is polished, and the best of those is kept.
     fn track_from_prior(
@@ -491,6 +492,9 @@ impl FrameTracker {
             return self.lose(cloud, "no verified pose yet".into());
         };
         let predicted = self.motion.predict(timestamp).unwrap_or(last);
+        // Without a velocity (the frame after the first, after a relocalisation or a
+        // restart) the prediction is the last pose, and a slide is the camera's motion.
+        let moving = self.motion.has_velocity();
         let prior = MotionPrior {
             predicted,
             seconds: timestamp - t_last,
@@ -518,10 +522,11 @@ impl FrameTracker {
         let mut wide_verified = false;
         // A fine answer that slid a little: the turned attempt decides.
         let mut doubtful: Option<Registration> = None;
-        // A verified answer that slid: the restarts around it decide, with no coarse-to-fine
-        // from the prediction, which the fine attempts started from already (fr2_desk's gap
-        // region with noise, scenes 1–6, three runs each: the worst row's p99 45.2–46.1 →
-        // 40.1–41.5 ms, position error within the run-to-run spread).
+        // A verified answer that slid from a moving prediction: the restarts around it
+        // decide, with no coarse-to-fine from the prediction, which the fine attempts started
+        // from already (fr2_desk's gap region with noise, scenes 1–6, three runs each: the
+        // worst row's p99 45.2–46.1 → 40.1–41.5 ms, position error within the run-to-run
+        // spread).
         let mut slid_verified = false;
         for (k, &(start, kind)) in tries.iter().enumerate() {
             // Both wide starts end in one basin (scene 1 along fr2_desk with noise: fitness
@@ -545,7 +550,7 @@ impl FrameTracker {
                         Ok(_) => String::new(),
                     },
                 });
-                if !gap && best.is_some() {
+                if !gap && best.is_some() && moving {
                     slid_verified = true;
                     break;
                 }

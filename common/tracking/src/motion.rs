@@ -55,6 +55,11 @@ impl ConstantVelocity {
         self.recent.extend(last);
     }
 
+    /// Whether a velocity is known (two verified poses within the horizon, none lost since).
+    pub fn has_velocity(&self) -> bool {
+        self.step.is_some()
+    }
+
     /// The last verified pose and its time.
     pub fn last(&self) -> Option<(Pose, f64)> {
         self.recent.back().copied()
