@@ -295,9 +295,11 @@ role = "source"
             old / 1_000_000,
             new / 1_000_000
         );
-        // 200 ms of slack for scheduling on a loaded 2-core machine.
+        // The new kind waits for a keyframe (at most the old kind's usual gap) and runs its
+        // first (warmed up, but beside the old process's exit: up to a quarter slower than
+        // its median), with 200 ms of slack for scheduling on a loaded 2-core machine.
         assert!(
-            gaps[i] <= old + new + 200_000_000,
+            gaps[i] <= old + new + new / 4 + 200_000_000,
             "gap at swap {} ms vs usual {} ms and period {} ms",
             gaps[i] / 1_000_000,
             old / 1_000_000,

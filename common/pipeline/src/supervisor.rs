@@ -317,6 +317,16 @@ impl RunState {
         a
     }
 
+    /// A process started while another of its stage serves (a swap, a scale) has time to
+    /// warm its model up before it reports ready (a stage with kinds is the segmenter).
+    fn args_beside_running(&self, s: &StageProcess) -> Vec<String> {
+        let mut a = self.args_for_process(s);
+        if s.spec.kind.is_some() {
+            a.push("--warm-up".to_string());
+        }
+        a
+    }
+
     /// The run's files as of now (atomic rewrites); the end of the run writes them again.
     fn snapshot(&mut self) {
         self.last_snapshot = Instant::now();
@@ -710,7 +720,7 @@ impl RunState {
         let mut spec = current.spec.clone();
         spec.kind = Some(kind.to_string());
         let mut process = StageProcess::new(spec, &self.log_dir);
-        let args = self.args_for_process(&process);
+        let args = self.args_beside_running(&process);
         process.spawn(&args).map_err(|e| e.to_string())?;
         self.note(&format!(
             "swap {stage}: starting '{kind}' (pid {}) beside the running '{from}'",
@@ -751,7 +761,7 @@ impl RunState {
         let mut started = Vec::new();
         for &replica in &plan.add {
             let mut p = StageProcess::replica(spec.clone(), &self.log_dir, replica);
-            let args = self.args_for_process(&p);
+            let args = self.args_beside_running(&p);
             if let Err(e) = p.spawn(&args) {
                 // Those spawned already are dropped (killed) with `started`.
                 return Err(format!("scale {stage}: {e:#}"));

@@ -1,8 +1,9 @@
 //! Make-before-break swap of a stage's kind (`opengs ctl swap STAGE --to KIND`):
 //!
 //! 1. **starting**: the new kind's process starts beside the running one, with the kind's own
-//!    arguments from the deploy file. It loads and checks its models before it reports ready,
-//!    so a bad model set ends here: the new process exits, the old one never noticed;
+//!    arguments from the deploy file. It loads and checks its models, and runs them once on a
+//!    blank frame (`--warm-up`), before it reports ready: a bad model set ends here (the new
+//!    process exits, the old one never noticed), and its first keyframe runs at full speed;
 //! 2. **retiring**: the new process takes the stage's place and the old one is asked to stop.
 //!    A stage stops between two messages, so a busy old process finishes its keyframe, unless
 //!    that takes longer than [`RETIRE_GRACE`]: then it is killed mid-keyframe;
