@@ -31,6 +31,8 @@ pub struct Pacer {
     paced: bool,
     /// The previous frame's due time and timestamp (s).
     previous: Option<(Instant, f64)>,
+    /// How far past its scheduled time the last frame was asked for (zero when on time).
+    late: Duration,
 }
 
 impl Pacer {
@@ -46,6 +48,7 @@ impl Pacer {
             min_step: max_rate.map_or(Duration::ZERO, period),
             paced: max_rate.is_none_or(|r| r > 0.0),
             previous: None,
+            late: Duration::ZERO,
         }
     }
 
@@ -62,17 +65,30 @@ impl Pacer {
     /// When the frame at `timestamp` (s) is due, asked at `now`; the answer becomes the
     /// previous frame's due time for the next call.
     pub fn due(&mut self, timestamp: f64, now: Instant) -> Instant {
+        self.late = Duration::ZERO;
         let due = match (self.paced, self.previous, self.recorded_step(timestamp)) {
             (true, Some((last_due, _)), Some(step)) => {
                 match last_due.checked_add(step.max(self.min_step)) {
-                    Some(due) if now.saturating_duration_since(due) <= CATCH_UP_LIMIT => due,
-                    _ => now,
+                    Some(due) => {
+                        self.late = now.saturating_duration_since(due);
+                        match self.late <= CATCH_UP_LIMIT {
+                            true => due,
+                            false => now,
+                        }
+                    }
+                    None => now,
                 }
             }
             _ => now,
         };
         self.previous = Some((due, timestamp));
         due
+    }
+
+    /// How late the frame of the last [`Pacer::due`] call was asked for against its
+    /// schedule: the time a sensor that reads frames too slowly lost on it.
+    pub fn lateness(&self) -> Duration {
+        self.late
     }
 }
 
@@ -156,5 +172,10 @@ mod tests {
         let slightly = next + ms(100);
         let after = pacer.due(3.0 / 30.0, slightly);
         assert_eq!(after.duration_since(next).as_millis(), 33);
+        // Asked 100 ms after the previous due time, 33.3 ms after which it was due.
+        assert_eq!(pacer.lateness().as_millis(), 66);
+        // On time: not late.
+        pacer.due(4.0 / 30.0, after);
+        assert_eq!(pacer.lateness(), Duration::ZERO);
     }
 }

@@ -11,6 +11,7 @@ use opengs_runtime::{
     HEARTBEAT,
 };
 
+use crate::frame_reader::{FrameReader, Read};
 use crate::pacing::{Pacer, ANNOUNCED_GAP, LONGEST_GAP};
 use crate::DatasetArgs;
 
@@ -33,8 +34,8 @@ pub struct SensorArgs {
     pub live: bool,
 }
 
-/// How often a live sensor with nothing to publish looks for appended frames.
-const LIVE_POLL: Duration = Duration::from_millis(200);
+/// How long the sensor waits for its reader before a heartbeat and a look for signals.
+const READ_POLL: Duration = Duration::from_millis(20);
 
 /// Sleeps in the WaitSet until `due`, with a heartbeat at least every [`HEARTBEAT`] (a
 /// recording's gap may be longer than the watchdog's patience); whether a termination
@@ -53,6 +54,44 @@ fn wait_until(ws: &WaitSet, telemetry: &TelemetrySink, due: Instant) -> anyhow::
         }
         if Instant::now() >= due {
             return Ok(false);
+        }
+    }
+}
+
+/// A frame read this much after its time is late (the pacer's schedule has jitter of its own).
+const LATE: Duration = Duration::from_millis(5);
+
+/// Frames that were read after they were due: the machine could not read the dataset at
+/// its rate beside the other stages.
+#[derive(Default)]
+struct Lateness {
+    frames: usize,
+    worst: Duration,
+}
+
+impl Lateness {
+    fn note(&mut self, index: usize, late: Duration) {
+        if late < LATE {
+            return;
+        }
+        if self.frames == 0 {
+            tracing::warn!(
+                "sensor: frame {index} was read {:.0} ms after it was due (reading the dataset \
+                 is slower than its rate on this machine)",
+                late.as_secs_f64() * 1e3
+            );
+        }
+        self.frames += 1;
+        self.worst = self.worst.max(late);
+    }
+
+    fn report(&self) {
+        if self.frames > 0 {
+            tracing::warn!(
+                "sensor: {} frames published late, read up to {:.0} ms after they were due",
+                self.frames,
+                self.worst.as_secs_f64() * 1e3
+            );
         }
     }
 }
@@ -89,7 +128,7 @@ pub fn publish_frame(
 /// Runs the sensor stage until the data ends or a termination signal arrives.
 pub fn run_sensor(ctx: &RunContext, args: &SensorArgs) -> anyhow::Result<()> {
     let node = ctx.node("sensor")?;
-    let mut source = open_dataset(&args.dataset.spec()?)?;
+    let source = open_dataset(&args.dataset.spec()?)?;
     let k = source.intrinsics();
     let total = source.len();
     if args.start_frame >= total && total > 0 && !args.live {
@@ -120,35 +159,24 @@ pub fn run_sensor(ctx: &RunContext, args: &SensorArgs) -> anyhow::Result<()> {
     );
     telemetry.ready();
 
-    let mut index = args.start_frame;
+    let live = args.live;
+    let reader = FrameReader::spawn(source, args.start_frame, live)?;
     let mut last = Stamp::new(MessageKind::Frame, 0, 0, 0);
-    let mut last_poll: Option<Instant> = None;
+    let mut published = args.start_frame;
+    let mut late = Lateness::default();
     let signalled = loop {
-        if index >= source.len() {
-            if !args.live {
-                break false;
-            }
-            telemetry.alive();
-            if last_poll.is_none_or(|t| t.elapsed() >= LIVE_POLL) {
-                last_poll = Some(Instant::now());
-                let added = source
-                    .refresh()
-                    .map_err(|e| crate::stage_main::BadInput(format!("{}: {e}", source.name())))?;
-                if added > 0 {
-                    tracing::info!("sensor: {added} new frames recorded");
-                }
-            }
-            if index >= source.len() {
-                // While waiting for a recorder, sleep in the WaitSet rather than spin.
-                if wait_until(&ws, &telemetry, Instant::now() + LIVE_POLL / 4)? {
-                    break true;
-                }
-                continue;
-            }
-        }
-        let frame = source
-            .frame(index)
-            .map_err(|e| crate::stage_main::BadInput(format!("frame {index}: {e}")))?;
+        let frame = match reader.next(READ_POLL) {
+            Some(Read::Frame(frame)) => frame,
+            Some(Read::Failed(why)) => return Err(crate::stage_main::BadInput(why).into()),
+            Some(Read::End) => break false,
+            // Nothing read yet (a live recording between frames, a slow disk): heartbeat,
+            // and look for a signal.
+            None => match wait_until(&ws, &telemetry, Instant::now())? {
+                true => break true,
+                false => continue,
+            },
+        };
+        let index = frame.index;
         if let Some(gap) = pacer
             .recorded_step(frame.timestamp)
             .filter(|gap| *gap >= ANNOUNCED_GAP)
@@ -162,7 +190,9 @@ pub fn run_sensor(ctx: &RunContext, args: &SensorArgs) -> anyhow::Result<()> {
                 }
             );
         }
-        if wait_until(&ws, &telemetry, pacer.due(frame.timestamp, Instant::now()))? {
+        let due = pacer.due(frame.timestamp, Instant::now());
+        late.note(index, pacer.lateness());
+        if wait_until(&ws, &telemetry, due)? {
             break true;
         }
         let start = now_ns();
@@ -171,12 +201,13 @@ pub fn run_sensor(ctx: &RunContext, args: &SensorArgs) -> anyhow::Result<()> {
         input.sent_ns = start;
         telemetry.processed(&input, start, now_ns());
         last = stamp;
-        index += 1;
+        published = index + 1;
     };
+    late.report();
     if signalled {
         tracing::info!("sensor: stopped by signal after frame {}", last.seq);
     } else {
-        tracing::info!("sensor: end of data after {index} frames");
+        tracing::info!("sensor: end of data after {published} frames");
         telemetry.finished(&last);
     }
     Ok(())
