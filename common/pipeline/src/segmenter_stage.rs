@@ -280,8 +280,7 @@ pub fn run_segmenter(
 }
 
 /// Segments a blank frame of the camera's size: a model's first run allocates its buffers
-/// and plans its kernels (tiny SAM: 760 ms against 540-700 for the next ones; in a swap
-/// beside a running pipeline, the first keyframe took 1.4 s against 1.1).
+/// and plans its kernels (tiny SAM alone: 760 ms against 540-700 for the next ones).
 fn warm_up(
     segmenter: &mut dyn Segmenter,
     k: Intrinsics,

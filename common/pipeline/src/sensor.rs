@@ -159,8 +159,7 @@ pub fn run_sensor(ctx: &RunContext, args: &SensorArgs) -> anyhow::Result<()> {
     );
     telemetry.ready();
 
-    let live = args.live;
-    let reader = FrameReader::spawn(source, args.start_frame, live)?;
+    let reader = FrameReader::spawn(source, args.start_frame, args.live)?;
     let mut last = Stamp::new(MessageKind::Frame, 0, 0, 0);
     let mut published = args.start_frame;
     let mut late = Lateness::default();
