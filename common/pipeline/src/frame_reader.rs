@@ -22,6 +22,7 @@ use std::thread::JoinHandle;
 use std::time::Duration;
 
 use opengs_datasets::{RgbdFrame, RgbdSource};
+use opengs_tracking::idle_time::{self, may_leave_idle};
 
 /// Frames read and waiting, at most (each about 2 MB at 640×480).
 const AHEAD: usize = 2;
@@ -109,7 +110,7 @@ impl FrameReader {
             Err(_) => true,
         };
         if behind && self.shared.idle_ok {
-            set_policy(self.shared.tid.load(Ordering::SeqCst), libc::SCHED_OTHER);
+            idle_time::set_idle(self.shared.tid.load(Ordering::SeqCst), false);
         }
         match got {
             Ok(read) => Some(read),
@@ -139,8 +140,7 @@ fn read_frames(
     tx: &SyncSender<Read>,
     shared: &Shared,
 ) {
-    // SAFETY: gettid has no preconditions.
-    let tid = unsafe { libc::gettid() };
+    let tid = idle_time::this_thread();
     shared.tid.store(tid, Ordering::SeqCst);
     let mut index = start;
     while !shared.stop.load(Ordering::Relaxed) {
@@ -164,9 +164,9 @@ fn read_frames(
         // Ahead: idle time only. Checked again after the switch, since the sensor may have
         // taken the last waiting frame (and asked for the normal policy) meanwhile.
         if shared.idle_ok && shared.waiting.load(Ordering::SeqCst) > 0 {
-            set_policy(tid, libc::SCHED_IDLE);
+            idle_time::set_idle(tid, true);
             if shared.waiting.load(Ordering::SeqCst) == 0 {
-                set_policy(tid, libc::SCHED_OTHER);
+                idle_time::set_idle(tid, false);
             }
         }
         // On this thread, in the policy just chosen (a pool's `install` would hand the read
@@ -183,38 +183,6 @@ fn read_frames(
         }
         index += 1;
     }
-}
-
-/// Whether a thread of this process may enter the idle policy and leave it again. Leaving it
-/// takes CAP_SYS_NICE or an RLIMIT_NICE that allows the thread's nice value (most
-/// distributions set 0 for users): a reader stuck idle would starve beside a busy stage.
-fn may_leave_idle() -> bool {
-    std::thread::spawn(|| {
-        // SAFETY: gettid has no preconditions.
-        let tid = unsafe { libc::gettid() };
-        set_policy(tid, libc::SCHED_IDLE) && set_policy(tid, libc::SCHED_OTHER)
-    })
-    .join()
-    .unwrap_or(false)
-}
-
-/// Puts thread `tid` of this process in `policy` (`SCHED_IDLE` or `SCHED_OTHER`, which keeps
-/// its nice value); false if refused (reading then runs in the policy it had).
-fn set_policy(tid: libc::pid_t, policy: libc::c_int) -> bool {
-    if tid == 0 {
-        return false;
-    }
-    let param = libc::sched_param { sched_priority: 0 };
-    // SAFETY: `tid` is a thread of this process (or gone, which only fails); `param` is a
-    // valid, initialised struct.
-    let rc = unsafe { libc::sched_setscheduler(tid, policy, &param) };
-    if rc != 0 {
-        tracing::debug!(
-            "sensor-read thread: policy {policy} refused ({})",
-            std::io::Error::last_os_error()
-        );
-    }
-    rc == 0
 }
 
 #[cfg(test)]

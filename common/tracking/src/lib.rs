@@ -8,6 +8,7 @@
 mod attempt;
 mod config;
 mod frame_tracker;
+pub mod idle_time;
 mod model;
 mod motion;
 mod relocalise;

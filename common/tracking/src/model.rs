@@ -5,12 +5,18 @@
 //! keyframes' points alone), at two resolutions for coarse-to-fine
 //! registration. Building it (covariances, hash grids, kd-trees) takes tens
 //! of milliseconds for 100k Gaussians, several times a second at 30 Hz, so a
-//! [`ModelBuilder`] can do it on a thread of its own, on idle CPU time, and hand
-//! each model over whole: the tracker never waits for one, it registers against
-//! the newest that is ready.
+//! [`ModelBuilder`] can do it on a thread of its own, on idle CPU time (lifted to the
+//! normal policy when an input has waited too long), and hand each model over whole: the
+//! tracker never waits for one, it registers against the newest that is ready.
 
+use std::collections::VecDeque;
+use std::sync::atomic::{AtomicI32, Ordering};
 use std::sync::mpsc::{channel, Receiver, Sender, TryRecvError};
+use std::sync::Arc;
 use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+
+use crate::idle_time;
 
 use opengs_gicp::{Cloud, CoarseToFineTarget, Gaussian, GicpError, Regularization};
 
@@ -158,26 +164,11 @@ impl ModelInputs {
     }
 }
 
-/// Puts the calling thread in Linux's `SCHED_IDLE` class: it runs only on CPU time nothing
-/// else wants. A build (after every keyframe and map update) beside the frame being
-/// registered slowed it: on 2 cores, frames near a keyframe took 52–66 ms through the
-/// pipeline and at most 33 ms alone. An older model for a few more frames costs nothing.
-/// Elsewhere the thread keeps its normal priority.
-fn run_on_idle_time() {
-    #[cfg(target_os = "linux")]
-    {
-        let param = libc::sched_param { sched_priority: 0 };
-        // SAFETY: pid 0 is the calling thread; `param` is a valid, initialised struct.
-        let rc = unsafe { libc::sched_setscheduler(0, libc::SCHED_IDLE, &param) };
-        if rc != 0 {
-            // Not fatal: the builder then competes with the tracker as before.
-            eprintln!(
-                "tracking-model thread: SCHED_IDLE refused ({})",
-                std::io::Error::last_os_error()
-            );
-        }
-    }
-}
+/// How long a submitted input may wait on a builder in the idle policy before the builder
+/// is lifted to the normal one (until it has handed the next model over). Beside stages
+/// that take every core (two CPU hogs, a SAM segmenter), idle time never came: the tracker
+/// went on against an ever older model and lost the frames it no longer covered.
+const STARVED: Duration = Duration::from_millis(300);
 
 /// Builds models inline (deterministic: tests, offline tools) or on a thread.
 pub struct ModelBuilder {
@@ -191,9 +182,43 @@ enum Mode {
     },
     Background {
         jobs: Option<Sender<Job>>,
-        built: Receiver<Result<TrackingModel, String>>,
+        /// Each result with the number of jobs applied when it was built.
+        built: Receiver<(usize, Result<TrackingModel, String>)>,
+        /// The builder thread's kernel id (0 until it runs).
+        tid: Arc<AtomicI32>,
+        pending: Pending,
         thread: Option<JoinHandle<()>>,
     },
+}
+
+/// Jobs submitted and not yet in a result, by when they were submitted.
+#[derive(Default)]
+struct Pending {
+    submitted: usize,
+    applied: usize,
+    since: VecDeque<Instant>,
+}
+
+impl Pending {
+    fn submit(&mut self, now: Instant) {
+        self.submitted += 1;
+        self.since.push_back(now);
+    }
+
+    /// A result built with the first `applied` jobs arrived.
+    fn built_with(&mut self, applied: usize) {
+        while self.applied < applied.min(self.submitted) {
+            self.applied += 1;
+            self.since.pop_front();
+        }
+    }
+
+    /// Whether the oldest job not yet in a result has waited `STARVED` or longer.
+    fn starved(&self, now: Instant) -> bool {
+        self.since
+            .front()
+            .is_some_and(|t| now.saturating_duration_since(*t) >= STARVED)
+    }
 }
 
 impl ModelBuilder {
@@ -212,21 +237,34 @@ impl ModelBuilder {
 
     /// Builds models on a thread of its own; inputs that arrive while it builds are
     /// folded into the next build.
+    ///
+    /// The first model is built in the normal policy (the tracker's second frame waits for
+    /// it), every later one on idle CPU time where the thread may come back from it
+    /// ([`idle_time`]): a build beside the frame being registered slowed it (on 2 cores,
+    /// frames near a keyframe took 52–66 ms through the pipeline and at most 33 ms alone),
+    /// and an older model for a few more frames costs nothing. The thread goes idle only
+    /// after it has handed a model over: idle before that, the hand-over itself starved.
     pub fn background(coarse_voxel: f64) -> std::io::Result<Self> {
         let (jobs, job_rx) = channel::<Job>();
         let (built_tx, built) = channel();
+        let tid = Arc::new(AtomicI32::new(0));
+        let theirs = Arc::clone(&tid);
+        let idle_ok = idle_time::may_leave_idle();
         let thread = std::thread::Builder::new()
             .name("tracking-model".into())
             .spawn(move || {
-                run_on_idle_time();
+                let me = idle_time::this_thread();
+                theirs.store(me, Ordering::SeqCst);
                 let mut inputs = ModelInputs {
                     coarse_voxel,
                     ..ModelInputs::default()
                 };
+                let mut applied = 0;
                 while let Ok(first) = job_rx.recv() {
                     let mut refused = Vec::new();
                     let mut pending = Some(first);
                     while let Some(job) = pending {
+                        applied += 1;
                         if let Err(e) = inputs.apply(job) {
                             refused.push(e);
                         }
@@ -242,9 +280,12 @@ impl ModelBuilder {
                         out.push(inputs.build().map_err(|e| e.to_string()));
                     }
                     for o in out {
-                        if built_tx.send(o).is_err() {
+                        if built_tx.send((applied, o)).is_err() {
                             return;
                         }
+                    }
+                    if idle_ok {
+                        idle_time::set_idle(me, true);
                     }
                 }
             })?;
@@ -252,6 +293,8 @@ impl ModelBuilder {
             mode: Mode::Background {
                 jobs: Some(jobs),
                 built,
+                tid,
+                pending: Pending::default(),
                 thread: Some(thread),
             },
         })
@@ -265,10 +308,12 @@ impl ModelBuilder {
                     .and_then(|()| inputs.build().map_err(|e| e.to_string()));
                 ready.push(result);
             }
-            Mode::Background { jobs, .. } => {
+            Mode::Background { jobs, pending, .. } => {
                 // A builder thread that is gone has panicked; tracking goes on with the last model.
                 if let Some(tx) = jobs {
-                    let _ = tx.send(job);
+                    if tx.send(job).is_ok() {
+                        pending.submit(Instant::now());
+                    }
                 }
             }
         }
@@ -288,21 +333,66 @@ impl ModelBuilder {
         self.submit(Job::Keyframe { seq, cloud });
     }
 
-    /// Models (or refusals) finished since the last call, oldest first.
+    /// Models (or refusals) finished since the last call, oldest first. A builder that has
+    /// starved on idle time (an input waiting [`STARVED`] or longer) is lifted to the normal
+    /// policy until its next model is handed over.
     pub(crate) fn finished(&mut self) -> Vec<Result<TrackingModel, String>> {
         match &mut self.mode {
             Mode::Inline { ready, .. } => std::mem::take(ready),
-            Mode::Background { built, .. } => built.try_iter().collect(),
+            Mode::Background {
+                built,
+                pending,
+                tid,
+                ..
+            } => {
+                let out = built
+                    .try_iter()
+                    .map(|(applied, result)| {
+                        pending.built_with(applied);
+                        result
+                    })
+                    .collect();
+                if pending.starved(Instant::now()) {
+                    lift(tid);
+                }
+                out
+            }
         }
     }
 
     /// Blocks until the builder has produced something (the very first model only:
-    /// the second frame cannot be tracked without it).
+    /// the second frame cannot be tracked without it), in the normal policy meanwhile.
     pub(crate) fn wait(&mut self) -> Vec<Result<TrackingModel, String>> {
         match &mut self.mode {
             Mode::Inline { ready, .. } => std::mem::take(ready),
-            Mode::Background { built, .. } => built.recv().map(|r| vec![r]).unwrap_or_default(),
+            Mode::Background {
+                built,
+                pending,
+                tid,
+                ..
+            } => {
+                lift(tid);
+                built
+                    .recv()
+                    .map(|(applied, result)| {
+                        pending.built_with(applied);
+                        vec![result]
+                    })
+                    .unwrap_or_default()
+            }
         }
+    }
+}
+
+/// Puts the builder thread back in the normal policy if it is idle. It goes idle only where
+/// the probe said it may come back, so a refusal is a race with a thread that ended.
+fn lift(tid: &AtomicI32) {
+    let tid = tid.load(Ordering::SeqCst);
+    if idle_time::is_idle(tid) && !idle_time::set_idle(tid, false) {
+        eprintln!(
+            "tracking-model thread {tid}: the normal policy was refused ({})",
+            std::io::Error::last_os_error()
+        );
     }
 }
 
@@ -416,27 +506,63 @@ mod tests {
         assert!(!model.holds_keyframe(12));
     }
 
+    #[test]
+    fn an_input_waiting_300_ms_without_a_result_is_starved() {
+        let t0 = Instant::now();
+        let ms = |n| t0 + Duration::from_millis(n);
+        let mut p = Pending::default();
+        assert!(!p.starved(ms(10_000)));
+        p.submit(ms(0));
+        p.submit(ms(200));
+        assert!(!p.starved(ms(299)));
+        assert!(p.starved(ms(300)));
+        // A result built with the first job: the second has waited 100 ms at 300.
+        p.built_with(1);
+        assert!(!p.starved(ms(300)) && p.starved(ms(500)));
+        // A result with both (a count past what was submitted changes nothing more).
+        p.built_with(5);
+        assert!(!p.starved(ms(10_000)));
+        assert_eq!((p.submitted, p.applied), (2, 2));
+    }
+
     #[cfg(target_os = "linux")]
     #[test]
-    fn the_builder_thread_runs_on_idle_time_only() {
+    fn the_builder_thread_runs_on_idle_time_after_the_first_model() {
         let mut b = ModelBuilder::background(0.05).expect("thread");
-        // Once it has built a model the thread has set its class.
+        let Mode::Background { tid, .. } = &b.mode else {
+            panic!("a background builder");
+        };
+        let tid = Arc::clone(tid);
+        let idle_soon = |want: bool| {
+            let t0 = Instant::now();
+            while idle_time::is_idle(tid.load(Ordering::SeqCst)) != want {
+                assert!(
+                    t0.elapsed() < Duration::from_secs(10),
+                    "never idle = {want}"
+                );
+                std::thread::sleep(Duration::from_millis(1));
+            }
+        };
+        let may = idle_time::may_leave_idle();
+        // The first model is built in the normal policy.
+        while tid.load(Ordering::SeqCst) == 0 {
+            std::thread::sleep(Duration::from_millis(1));
+        }
+        assert!(!idle_time::is_idle(tid.load(Ordering::SeqCst)));
         b.add_keyframe(1, plane_cloud(0.0, 10));
         assert!(b.wait()[0].is_ok());
-        let tasks = std::fs::read_dir("/proc/self/task").expect("/proc/self/task");
-        let tid = tasks
-            .filter_map(Result::ok)
-            .find(|t| {
-                std::fs::read_to_string(t.path().join("comm"))
-                    .is_ok_and(|c| c.trim() == "tracking-model")
-            })
-            .and_then(|t| t.file_name().to_str()?.parse::<libc::pid_t>().ok())
-            .expect("a thread named tracking-model");
-        // SAFETY: reads the scheduling policy of a thread of this process.
-        let policy = unsafe { libc::sched_getscheduler(tid) };
-        assert_eq!(policy, libc::SCHED_IDLE);
+        // Then idle time, where the thread may come back (as root or with CAP_SYS_NICE);
+        // elsewhere the normal policy throughout.
+        idle_soon(may);
+        if may {
+            // Lifted, then idle again once it has handed the next model over.
+            lift(&tid);
+            assert!(!idle_time::is_idle(tid.load(Ordering::SeqCst)));
+            b.add_keyframe(2, plane_cloud(1.0, 10));
+            assert!(b.wait()[0].is_ok());
+            idle_soon(true);
+        }
         // The caller's thread keeps its class.
-        // SAFETY: pid 0 is the calling thread.
-        assert_ne!(unsafe { libc::sched_getscheduler(0) }, libc::SCHED_IDLE);
+        assert!(!idle_time::is_idle(idle_time::this_thread()));
     }
 }
