@@ -44,6 +44,8 @@ pub struct FrameView<'a> {
 impl FrameHeader {
     pub const HAS_GT: u32 = 1;
     pub const HAS_LABELS: u32 = 2;
+    /// The recording's last frame (a finite dataset's; a live one never sets it).
+    pub const LAST: u32 = 4;
 
     #[allow(clippy::too_many_arguments)]
     pub fn new(
@@ -84,6 +86,16 @@ impl FrameHeader {
 
     pub fn has_labels(&self) -> bool {
         self.flags & Self::HAS_LABELS != 0
+    }
+
+    /// Marks the frame as the recording's last.
+    pub fn last(mut self) -> Self {
+        self.flags |= Self::LAST;
+        self
+    }
+
+    pub fn is_last(&self) -> bool {
+        self.flags & Self::LAST != 0
     }
 
     pub fn pixels(&self) -> usize {
@@ -143,7 +155,7 @@ impl FrameHeader {
         if self.has_gt() && self.gt_pose.iter().any(|v| !v.is_finite()) {
             return Err(SchemaError::NonFinite("gt_pose"));
         }
-        if self.flags & !(Self::HAS_GT | Self::HAS_LABELS) != 0 {
+        if self.flags & !(Self::HAS_GT | Self::HAS_LABELS | Self::LAST) != 0 {
             return Err(SchemaError::Invalid("unknown frame flags"));
         }
         check_total(self.layout_len(), payload.len())?;

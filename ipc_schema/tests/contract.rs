@@ -116,6 +116,13 @@ fn frame_malformed_headers_rejected() {
         bad.decode(payload),
         Err(SchemaError::NonFinite("gt_pose"))
     ));
+    // The last-frame mark changes no plane; a flag nobody defined is refused.
+    let last = hdr.last();
+    assert!(last.is_last() && !hdr.is_last());
+    assert_eq!(last.decode(payload).expect("last frame").depth, &depth[..]);
+    let mut bad = hdr;
+    bad.flags |= 8;
+    assert!(matches!(bad.decode(payload), Err(SchemaError::Invalid(_))));
     let mut bad = hdr;
     bad.flags |= FrameHeader::HAS_LABELS; // claims a labels plane that is not there
     assert!(matches!(

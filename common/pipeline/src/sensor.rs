@@ -96,11 +96,13 @@ impl Lateness {
     }
 }
 
-/// Writes one frame into a loaned sample and sends it; returns its stamp.
+/// Writes one frame into a loaned sample and sends it (`last`: the recording's last
+/// frame); returns its stamp.
 pub fn publish_frame(
     outlet: &Outlet<FrameHeader>,
     frame: &RgbdFrame,
     k: &Intrinsics,
+    last: bool,
 ) -> anyhow::Result<Stamp> {
     let capture_ns = (frame.timestamp.max(0.0) * 1e9) as u64;
     let mut stamp = Stamp::new(MessageKind::Frame, frame.index as u64, capture_ns, 0);
@@ -116,6 +118,10 @@ pub fn publish_frame(
         frame.labels.is_some(),
         frame.index as u64,
     );
+    let header = match last {
+        true => header.last(),
+        false => header,
+    };
     let parts = FrameParts {
         depth: &frame.depth,
         labels: frame.labels.as_deref(),
@@ -195,7 +201,9 @@ pub fn run_sensor(ctx: &RunContext, args: &SensorArgs) -> anyhow::Result<()> {
             break true;
         }
         let start = now_ns();
-        let stamp = publish_frame(&frames, &frame, &k)?;
+        // The tracker lets go of what it holds for the next frame at the last one.
+        let is_last = !args.live && index + 1 == total;
+        let stamp = publish_frame(&frames, &frame, &k, is_last)?;
         let mut input = stamp;
         input.sent_ns = start;
         telemetry.processed(&input, start, now_ns());

@@ -18,7 +18,8 @@ mod visibility;
 
 pub use config::TrackerConfig;
 pub use frame_tracker::{
-    DepthFrame, FrameTracker, KeyframeKind, TrackOutcome, TrackStatus, WorldKeyframeCloud,
+    DepthFrame, FrameTracker, KeyframeKind, StartedAgain, TrackOutcome, TrackStatus,
+    WorldKeyframeCloud,
 };
 pub use model::{MapGaussians, ModelUpdate, TrackingModel};
 pub use motion::ConstantVelocity;

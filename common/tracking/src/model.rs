@@ -117,6 +117,8 @@ enum Job {
         seq: u64,
         cloud: Cloud,
     },
+    /// Everything goes: tracking starts again.
+    Clear,
 }
 
 impl ModelInputs {
@@ -138,6 +140,10 @@ impl ModelInputs {
                 self.keyframes.retain(|(s, _)| *s > seq);
             }
             Job::Keyframe { seq, cloud } => self.keyframes.push((seq, cloud)),
+            Job::Clear => {
+                self.map = None;
+                self.keyframes.clear();
+            }
         }
         Ok(())
     }
@@ -187,6 +193,9 @@ enum Mode {
         /// The builder thread's kernel id (0 until it runs).
         tid: Arc<AtomicI32>,
         pending: Pending,
+        /// Results built before the newest [`ModelBuilder::clear`] (fewer jobs applied) are
+        /// of inputs that are gone.
+        cleared_at: usize,
         thread: Option<JoinHandle<()>>,
     },
 }
@@ -295,6 +304,7 @@ impl ModelBuilder {
                 built,
                 tid,
                 pending: Pending::default(),
+                cleared_at: 0,
                 thread: Some(thread),
             },
         })
@@ -302,6 +312,10 @@ impl ModelBuilder {
 
     fn submit(&mut self, job: Job) {
         match &mut self.mode {
+            Mode::Inline { inputs, ready } if matches!(job, Job::Clear) => {
+                ready.clear();
+                let _ = inputs.apply(job);
+            }
             Mode::Inline { inputs, ready } => {
                 let result = inputs
                     .apply(job)
@@ -333,6 +347,20 @@ impl ModelBuilder {
         self.submit(Job::Keyframe { seq, cloud });
     }
 
+    /// Drops every input and every model not handed over yet: the next model holds only
+    /// what comes after this.
+    pub fn clear(&mut self) {
+        self.submit(Job::Clear);
+        if let Mode::Background {
+            pending,
+            cleared_at,
+            ..
+        } = &mut self.mode
+        {
+            *cleared_at = pending.submitted;
+        }
+    }
+
     /// Models (or refusals) finished since the last call, oldest first. A builder that has
     /// starved on idle time (an input waiting [`STARVED`] or longer) is lifted to the normal
     /// policy until its next model is handed over.
@@ -343,13 +371,14 @@ impl ModelBuilder {
                 built,
                 pending,
                 tid,
+                cleared_at,
                 ..
             } => {
                 let out = built
                     .try_iter()
-                    .map(|(applied, result)| {
+                    .filter_map(|(applied, result)| {
                         pending.built_with(applied);
-                        result
+                        (applied >= *cleared_at).then_some(result)
                     })
                     .collect();
                 if pending.starved(Instant::now()) {
@@ -369,16 +398,17 @@ impl ModelBuilder {
                 built,
                 pending,
                 tid,
+                cleared_at,
                 ..
             } => {
                 lift(tid);
-                built
-                    .recv()
-                    .map(|(applied, result)| {
-                        pending.built_with(applied);
-                        vec![result]
-                    })
-                    .unwrap_or_default()
+                while let Ok((applied, result)) = built.recv() {
+                    pending.built_with(applied);
+                    if applied >= *cleared_at {
+                        return vec![result];
+                    }
+                }
+                Vec::new()
             }
         }
     }
@@ -490,6 +520,27 @@ mod tests {
             got = b.wait();
         }
         assert_eq!(got[0].as_ref().map(|m| m.map_seq()).ok(), Some(Some(2)));
+    }
+
+    #[test]
+    fn a_cleared_builder_builds_only_what_came_after_it() {
+        for mut b in [
+            ModelBuilder::inline(0.05),
+            ModelBuilder::background(0.05).expect("thread"),
+        ] {
+            b.add_keyframe(0, plane_cloud(0.0, 10));
+            b.set_map(0, gaussians(20), Regularization::default());
+            // Neither is waited for: a build of them still on its way is not handed over.
+            b.clear();
+            b.add_keyframe(4, plane_cloud(2.0, 5));
+            let mut got = b.finished();
+            while got.is_empty() {
+                got = b.wait();
+            }
+            let m = got.pop().expect("built").expect("model");
+            assert_eq!((m.len(), m.keyframes(), m.map_seq()), (25, 1, None));
+            assert!(got.is_empty(), "{} older models handed over", got.len());
+        }
     }
 
     #[test]

@@ -2,7 +2,8 @@
 //! between frames is recovered, a 6° shake about the camera centre is tracked without
 //! the wide search, a frame from elsewhere is lost and grows nothing, and tracking
 //! relocalises when the camera comes back after ten lost frames, inline and on the
-//! pipeline's relocalisation thread.
+//! pipeline's relocalisation thread; a camera lost before ten frames after its start
+//! verified starts again where it is.
 
 use opengs_datasets::synthetic::noise::quantize_depth;
 use opengs_datasets::synthetic::raycast::render;
@@ -253,4 +254,70 @@ fn the_second_frame_after_dropped_ones_is_found_without_a_velocity() {
             error(&out, &truth) * 100.0
         );
     }
+}
+
+/// The camera 1.2 m and 150° away from the path's frame `n`.
+fn far_from(room: &Room, n: usize) -> Pose {
+    room.path[n] * Isometry3::new(Vector3::new(0.8, 0.0, -0.9), Vector3::y() * 2.6)
+}
+
+#[test]
+fn a_camera_lost_before_its_start_stands_starts_again_where_it_is() {
+    let room = room();
+    let mut tracker = FrameTracker::new(TrackerConfig::tum());
+    tracker.set_first_pose(room.path[0]);
+    for (i, pose) in room.path[..7].iter().enumerate() {
+        let out = room.track(&mut tracker, pose, i as f64 / FPS);
+        assert!(out.status.has_pose(), "frame {i}: {:?}", out.failure);
+    }
+    // Six frames tracked: too few views for a camera to come back to.
+    assert!(!tracker.start_stands());
+    // The next frame is from halfway round the loop: tracking starts again there, at the
+    // pose a start is given (here the truth, as the pipeline gives it with --gt-first-pose).
+    let there = room.path[100];
+    tracker.set_first_pose(there);
+    let t0 = 7.0 / FPS;
+    let again = room.track(&mut tracker, &there, t0);
+    assert_eq!(again.status, TrackStatus::Initial, "{:?}", again.failure);
+    let given_up = again.started_again.as_ref().expect("started again");
+    assert_eq!(given_up.given_up, 0);
+    assert!(given_up.why.contains("tracking lost"), "{}", given_up.why);
+    assert_eq!(again.pose, there);
+    assert!(again.keyframe.is_some(), "a new start is a keyframe");
+    // Frames from there on are tracked against the new start alone, and after ten of them
+    // the start stands.
+    for k in 1..=12 {
+        let truth = room.path[100 + k];
+        let out = room.track(&mut tracker, &truth, t0 + k as f64 / FPS);
+        assert_eq!(
+            out.status,
+            TrackStatus::Tracked,
+            "frame {k}: {:?}",
+            out.failure
+        );
+        assert!(out.started_again.is_none());
+        assert!(
+            error(&out, &truth) < 0.005,
+            "frame {k}: {:.2} cm",
+            error(&out, &truth) * 100.0
+        );
+        assert_eq!(tracker.start_stands(), k >= 10, "frame {k}");
+    }
+    // Once the start stands, a frame that fails is lost, not a new start.
+    let lost = room.track(&mut tracker, &far_from(&room, 112), t0 + 13.0 / FPS);
+    assert_eq!(lost.status, TrackStatus::Lost, "{:?}", lost.failure);
+    assert!(lost.started_again.is_none() && lost.keyframe.is_none());
+}
+
+#[test]
+fn a_kept_start_is_never_given_up() {
+    let room = room();
+    let mut tracker = FrameTracker::new(TrackerConfig::tum());
+    tracker.set_first_pose(room.path[0]);
+    room.track(&mut tracker, &room.path[0], 0.0);
+    tracker.keep_start();
+    let out = room.track(&mut tracker, &far_from(&room, 0), 1.0 / FPS);
+    assert_eq!(out.status, TrackStatus::Lost, "{:?}", out.failure);
+    assert!(out.started_again.is_none() && out.keyframe.is_none());
+    assert_eq!(out.pose, room.path[0]);
 }

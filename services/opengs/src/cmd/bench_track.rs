@@ -55,13 +55,17 @@ pub fn run(args: BenchTrackArgs) -> anyhow::Result<()> {
     // As the tracker stage: models are built and relocalisation guesses tried on threads
     // of their own.
     let mut tracker = FrameTracker::threaded(TrackerConfig::for_width(k.width))?;
-    if let Some(gt) = frames.first().and_then(|f| f.gt) {
-        tracker.set_first_pose(gt);
-    }
     let mut all = Histogram::<u64>::new_with_bounds(1, 600_000_000, 3)?;
     let mut wide = Histogram::<u64>::new_with_bounds(1, 600_000_000, 3)?;
-    let (mut lost, mut sq_err, mut scored) = (0usize, 0.0f64, 0usize);
+    // Each frame's pose, if it has one, and its squared position error (`None` without
+    // ground truth).
+    let mut posed: Vec<Option<Option<f64>>> = Vec::with_capacity(n);
+    let mut starts_again = 0usize;
     for (i, f) in frames.iter().enumerate() {
+        // A start (and a start again) is at the truth: the error needs no alignment.
+        if let Some(gt) = f.gt {
+            tracker.set_first_pose(gt);
+        }
         let frame = DepthFrame {
             depth: &f.depth,
             depth_scale: f.depth_scale,
@@ -76,7 +80,7 @@ pub fn run(args: BenchTrackArgs) -> anyhow::Result<()> {
             wide.saturating_record(us);
         }
         let ms = us as f64 / 1e3;
-        if ms > args.slow_ms {
+        if ms > args.slow_ms && out.started_again.is_none() {
             println!(
                 "  frame {i:5} ({:.3} s): {ms:6.1} ms  {:?}{}{}",
                 f.timestamp,
@@ -89,15 +93,30 @@ pub fn run(args: BenchTrackArgs) -> anyhow::Result<()> {
                     .map_or(String::new(), |why| format!(": {why}"))
             );
         }
-        if out.status.has_pose() {
-            if let Some(gt) = f.gt {
-                sq_err += (out.pose.translation.vector - gt.translation.vector).norm_squared();
-                scored += 1;
+        if let Some(again) = &out.started_again {
+            // The frames since the start given up have no pose any more (frame indices are the
+            // tracker's count).
+            starts_again += 1;
+            let from = usize::try_from(again.given_up).unwrap_or(usize::MAX);
+            for p in posed.iter_mut().skip(from) {
+                *p = None;
             }
-        } else {
-            lost += 1;
+            println!(
+                "  frame {i:5} ({:.3} s): {ms:6.1} ms  tracking starts again ({}); frames {}–{} have no pose",
+                f.timestamp,
+                again.why,
+                again.given_up,
+                i.saturating_sub(1)
+            );
         }
+        posed.push(out.status.has_pose().then(|| {
+            f.gt.map(|gt| (out.pose.translation.vector - gt.translation.vector).norm_squared())
+        }));
     }
+    let lost = posed.iter().filter(|p| p.is_none()).count();
+    let sq_errors: Vec<f64> = posed.iter().flatten().flatten().copied().collect();
+    let scored = sq_errors.len();
+    let sq_err: f64 = sq_errors.iter().sum();
     let q = |h: &Histogram<u64>, p: f64| h.value_at_quantile(p) as f64 / 1e3;
     println!(
         "per frame: p50 {:.1} ms, p90 {:.1} ms, p99 {:.1} ms, max {:.1} ms ({} frames, {} thread(s))",
@@ -118,7 +137,11 @@ pub fn run(args: BenchTrackArgs) -> anyhow::Result<()> {
     }
     let rmse = (scored > 0).then(|| (sq_err / scored as f64).sqrt() * 100.0);
     println!(
-        "lost {lost} of {n}; position error RMSE {} (no alignment: the first pose is the truth)",
+        "lost {lost} of {n}{}; position error RMSE {} (no alignment: a start's pose is the truth)",
+        match starts_again {
+            0 => String::new(),
+            r => format!(" (tracking started again {r} time(s))"),
+        },
         rmse.map_or("n/a (no ground truth)".into(), |e| format!("{e:.3} cm"))
     );
     Ok(())
