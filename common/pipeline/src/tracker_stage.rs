@@ -82,8 +82,8 @@ struct OwnedKeyframe {
 
 /// What went out since a start that does not stand yet ([`FrameTracker::keep_start`]): a
 /// frame lost before it stands starts tracking again, and what the start given up saw must
-/// never reach the map. So its keyframes are held back (the first second's), and the poses
-/// are kept to be published again as lost.
+/// never reach the map. So its keyframes are held back (ten frames' worth in a normal run),
+/// and the poses are kept to be published again as lost.
 #[derive(Default)]
 struct SinceStart {
     poses: Vec<PoseHeader>,
