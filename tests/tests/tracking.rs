@@ -160,6 +160,11 @@ fn a_recording_that_starts_before_gaps_starts_tracking_again_after_them() {
     .arg(fr2_desk);
     let (stdout, metrics) = finished(&mut cmd, &out);
     assert_eq!(metrics["frames_lost"], 2, "{stdout}");
+    // Both had a pose (each a start) until the next frame gave it up.
+    assert!(
+        stdout.contains("tracking started again soon after its start: 2 of them had a pose"),
+        "{stdout}"
+    );
     assert_eq!(metrics["frames"], 58, "{stdout}");
     let rmse = metrics["ate_rmse_cm"].as_f64().expect("ate_rmse_cm");
     assert!(rmse < 1.0, "ATE RMSE {rmse} cm");

@@ -137,6 +137,9 @@ pub struct Recorder {
     keyframe_poses: BTreeMap<u64, TimedPose>,
     /// The newest settled verified pose.
     last_settled_verified: Option<TimedPose>,
+    /// Verified poses published again as lost: the tracker started again and gave up the
+    /// start they belonged to.
+    withdrawn: usize,
     files: Option<Files>,
 }
 
@@ -151,6 +154,7 @@ impl Recorder {
             settled: Counts::default(),
             keyframe_poses: BTreeMap::new(),
             last_settled_verified: None,
+            withdrawn: 0,
             files: None,
         }
     }
@@ -190,7 +194,13 @@ impl Recorder {
             // A repeated seq that is no longer a verified keyframe.
             self.keyframe_poses.remove(&seq);
         }
-        self.recent.insert(seq, frame);
+        if self
+            .recent
+            .insert(seq, frame)
+            .is_some_and(|before| before.status.has_pose() && status == PoseStatus::Lost)
+        {
+            self.withdrawn += 1;
+        }
     }
 
     fn counts(&self) -> Counts {
@@ -239,6 +249,12 @@ impl Recorder {
     /// Frames where tracking resumed after lost frames.
     pub fn relocalised(&self) -> usize {
         self.counts().relocalised
+    }
+
+    /// Frames whose verified pose was published again as lost (counted in [`Self::lost`]):
+    /// the tracker started again and gave up the start they were tracked from.
+    pub fn withdrawn(&self) -> usize {
+        self.withdrawn
     }
 
     /// Appends the frames more than [`SETTLE_AFTER`] seqs behind the newest to
@@ -319,6 +335,11 @@ mod tests {
         }
         // A second tracker repeats seq 90 with another pose: it is recent, so it wins.
         r.record(&pose_msg(90, -1.0, true), PoseStatus::Tracked);
+        assert_eq!(r.withdrawn(), 0);
+        // The tracker gives up the start seq 95 was tracked from: lost now, and withdrawn.
+        r.record(&pose_msg(95, 9.5, false), PoseStatus::Lost);
+        assert_eq!((r.lost(), r.withdrawn()), (2, 1));
+        r.record(&pose_msg(95, 9.5, false), PoseStatus::Tracked);
         r.write().expect("snapshot");
         let run = RunDir::new(dir.path());
         // Seqs 0..=35 are more than 64 behind 99: written; the rest waits.

@@ -22,9 +22,11 @@ pub struct RunSummary {
     pub frames_published: u64,
     pub poses: usize,
     pub keyframes: usize,
-    /// Frames without a verified pose, and relocalisations after them.
+    /// Frames without a verified pose, relocalisations after them, and those among them whose
+    /// verified pose was withdrawn when tracking started again.
     pub lost_frames: usize,
     pub relocalisations: usize,
+    pub withdrawn: usize,
     pub elapsed_s: f64,
     /// Seconds until the data ended (or the run stopped), without the stages' final work.
     pub streaming_s: f64,
@@ -73,6 +75,7 @@ pub fn run(opts: RunOptions) -> anyhow::Result<RunSummary> {
         keyframes: supervised.recorder.keyframes(),
         lost_frames: supervised.recorder.lost(),
         relocalisations: supervised.recorder.relocalised(),
+        withdrawn: supervised.recorder.withdrawn(),
         elapsed_s: started.elapsed().as_secs_f64(),
         streaming_s: supervised.streaming_s,
         latency: supervised.profile.report(),

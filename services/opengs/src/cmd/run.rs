@@ -241,6 +241,13 @@ fn print_summary(s: &RunSummary) {
              trajectory.txt",
             s.lost_frames, s.relocalisations
         );
+        if s.withdrawn > 0 {
+            println!(
+                "tracking started again soon after its start: {} of them had a pose, given up \
+                 with that start and left out of the map (the tracker's log says where)",
+                s.withdrawn
+            );
+        }
     }
     let skipped = s.frames_published.saturating_sub(s.poses as u64);
     if skipped > 0 {
