@@ -201,7 +201,7 @@ pub fn run_sensor(ctx: &RunContext, args: &SensorArgs) -> anyhow::Result<()> {
             break true;
         }
         let start = now_ns();
-        // The tracker lets go of what it holds for the next frame at the last one.
+        // At the last frame the tracker lets go of the keyframes it holds back.
         let is_last = !args.live && index + 1 == total;
         let stamp = publish_frame(&frames, &frame, &k, is_last)?;
         let mut input = stamp;
