@@ -281,9 +281,18 @@ impl TrackerStage {
                 labels: k.labels.as_deref(),
                 rgb: &k.rgb,
             };
-            self.keyframes
-                .send(k.header, |hd, buf| hd.encode(&parts, buf))?;
+            self.publish_keyframe(k.header, &parts)?;
         }
+        Ok(())
+    }
+
+    fn publish_keyframe(
+        &self,
+        header: KeyframeHeader,
+        parts: &KeyframeParts,
+    ) -> anyhow::Result<()> {
+        self.keyframes
+            .send(header, |hd, buf| hd.encode(parts, buf))?;
         Ok(())
     }
 
@@ -307,9 +316,7 @@ impl TrackerStage {
             labels: view.labels,
             rgb: view.rgb,
         };
-        self.keyframes
-            .send(header, |hd, buf| hd.encode(&parts, buf))?;
-        Ok(())
+        self.publish_keyframe(header, &parts)
     }
 }
 
