@@ -37,6 +37,11 @@ pub struct SensorArgs {
 /// How long the sensor waits for its reader before a heartbeat and a look for signals.
 const READ_POLL: Duration = Duration::from_millis(20);
 
+/// How long the sensor keeps its publisher after the end of data unless stopped first: iceoryx2
+/// loses the samples of a publisher that left before a subscriber's first receive from it (a
+/// one-frame recording's only frame, on a busy machine); a woken stage receives well within it.
+const HOLD_AFTER_END: Duration = Duration::from_secs(2);
+
 /// Sleeps in the WaitSet until `due`, with a heartbeat at least every [`HEARTBEAT`] (a
 /// recording's gap may be longer than the watchdog's patience); whether a termination
 /// signal came first.
@@ -216,6 +221,9 @@ pub fn run_sensor(ctx: &RunContext, args: &SensorArgs) -> anyhow::Result<()> {
     } else {
         tracing::info!("sensor: end of data after {published} frames");
         telemetry.finished(&last);
+        // The frames stay deliverable until the supervisor stops the run (or the hold ends).
+        wait_until(&ws, &telemetry, Instant::now() + HOLD_AFTER_END)?;
+        drop(frames);
     }
     Ok(())
 }
