@@ -21,14 +21,17 @@
 //!    - colour only where geometry is undecided: weak evidence (a bend
 //!      under θ, a plane offset |n·(x_a − x_b)| of parallel planes, a few
 //!      step pairs) plus a colour edge between the patch means → cut (a
-//!      flat book on a desk). Colour alone never cuts: a checker or brick
-//!      pattern is one surface.
+//!      flat book on a desk). Colour alone never cuts a boundary: a checker
+//!      or brick pattern is one surface (step 4's flat objects are the one
+//!      place colour alone decides, and never for a colour that repeats).
 //! 4. Segments = connected components of patches over joined boundaries;
 //!    pieces under `min_pixels` join the neighbour with the weakest cut;
 //!    large planar segments in one plane that do not touch join, and small
 //!    pieces in their colour with them ([`coplanar`]: one floor around a
 //!    table's legs); object-sized segments that meet at a crease in one colour
-//!    up to shading join ([`creases`]: a sofa's seat and back).
+//!    up to shading join ([`creases`]: a sofa's seat and back); a flat, plain,
+//!    compact piece of a surface in a colour found nowhere else on it is split
+//!    off ([`flat_objects`]: a picture on a wall, where no depth cue is left).
 //! 5. Holes without depth take the single segment around them, else 0.
 //! 6. Confidence = boundary-length-weighted mean evidence of the segment's
 //!    cut boundaries (a depth step is 1, a colour cut at most 0.5).
@@ -55,6 +58,7 @@ mod colour;
 mod convexity;
 mod coplanar;
 mod creases;
+mod flat_objects;
 mod patches;
 mod regions;
 
@@ -115,6 +119,10 @@ pub struct GeometryParams {
     /// shading are one object (a sofa's seat and back); 0 turns the join off.
     pub crease_max_share: f32,
     pub crease_step_share: f32,
+    /// Smallest flat object in a colour found nowhere else on its surface, as a share of the
+    /// frame, split off the surface it lies on ([`flat_objects`]: a picture on a wall); 0 turns
+    /// the split off.
+    pub flat_min_share: f32,
     /// Seeds the per-frame shuffle of label ids.
     pub seed: u64,
 }
@@ -140,6 +148,7 @@ impl Default for GeometryParams {
             coplanar_inliers: 0.8,
             crease_max_share: 0.15,
             crease_step_share: 0.25,
+            flat_min_share: 0.005,
             seed: 0x6e0_5e9,
         }
     }
@@ -178,6 +187,7 @@ impl GeometrySegmenter {
                 params.coplanar_angle,
                 params.crease_max_share,
                 params.crease_step_share,
+                params.flat_min_share,
             ]
             .into_iter()
             .all(|x| x.is_finite() && x >= 0.0)
@@ -273,6 +283,17 @@ impl GeometrySegmenter {
             max_step_share: p.crease_step_share,
         }
         .join(&patches.stats, &self.edges, &segment_of_patch, count);
+        let (segment_of_patch, count) = flat_objects::FlatObjectRules {
+            min_share: p.flat_min_share,
+        }
+        .split(
+            &patches.stats,
+            &self.edges,
+            &patches.of,
+            coarse.width,
+            &segment_of_patch,
+            count,
+        );
         let confidence =
             regions::segment_confidence(&self.edges, &verdicts, &segment_of_patch, count);
         let segments = regions::paint_and_fill_holes(&patches.of, &segment_of_patch, coarse.width);

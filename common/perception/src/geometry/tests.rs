@@ -66,6 +66,26 @@ fn cuboid(min: [f32; 3], max: [f32; 3], colour: [u8; 3]) -> (Shape, Paint) {
     (Shape::Cuboid { min, max }, Paint::Plain(colour))
 }
 
+/// The camera at the origin looking straight along +z.
+fn looking_ahead(objects: Vec<(Shape, Paint)>) -> Scene {
+    Scene {
+        eye: [0.0, 0.0, 0.0],
+        pitch: 0.0,
+        objects,
+    }
+}
+
+/// The wall z = 2 m.
+fn wall_ahead(paint: Paint) -> (Shape, Paint) {
+    (
+        Shape::Plane {
+            normal: [0.0, 0.0, 1.0],
+            offset: 2.0,
+        },
+        paint,
+    )
+}
+
 fn box_on_floor() -> Scene {
     desk_view(vec![
         floor(Paint::Plain(GREY)),
@@ -147,26 +167,16 @@ fn a_ball_on_a_box_comes_apart() {
 #[test]
 fn a_concave_wall_corner_splits() {
     // Looking straight at an inside corner: wall z = 2 m, wall x = 0.4 m.
-    let r = Scene {
-        eye: [0.0, 0.0, 0.0],
-        pitch: 0.0,
-        objects: vec![
-            (
-                Shape::Plane {
-                    normal: [0.0, 0.0, 1.0],
-                    offset: 2.0,
-                },
-                Paint::Plain(WHITE),
-            ),
-            (
-                Shape::Plane {
-                    normal: [1.0, 0.0, 0.0],
-                    offset: 0.4,
-                },
-                Paint::Plain(WHITE),
-            ),
-        ],
-    }
+    let r = looking_ahead(vec![
+        wall_ahead(Paint::Plain(WHITE)),
+        (
+            Shape::Plane {
+                normal: [1.0, 0.0, 0.0],
+                offset: 0.4,
+            },
+            Paint::Plain(WHITE),
+        ),
+    ])
     .render();
     assert_apart(&segment(&r), &r, &[0, 1], "wall corner");
 }
@@ -192,6 +202,50 @@ fn a_flat_book_splits_by_colour_where_geometry_is_weak() {
     ])
     .render();
     assert_apart(&segment(&r), &r, &[0, 1], "book on desk");
+}
+
+/// A wall 2 m ahead in `paint`, a picture in `colour` 4 mm thick on it (too thin for any
+/// geometric cue: a plane offset of 0.2 of full evidence).
+fn picture_on_a_wall(paint: Paint, colour: [u8; 3]) -> Rendered {
+    looking_ahead(vec![
+        wall_ahead(paint),
+        cuboid([-0.4, -0.25, 1.996], [0.3, 0.25, 2.0], colour),
+    ])
+    .render()
+}
+
+#[test]
+fn a_picture_on_a_wall_splits_by_its_own_colour() {
+    // Colours a colour edge apart (patches never straddle one): white on grey, wood on black
+    // and white.
+    for (paint, colour, what) in [
+        (Paint::Plain(GREY), WHITE, "plain wall"),
+        // On the wall z = 2 the checker is vertical stripes 10 cm wide.
+        (Paint::Checker(0.1, BLACK, WHITE), WOOD, "striped wall"),
+    ] {
+        let r = picture_on_a_wall(paint, colour);
+        assert_apart(&segment(&r), &r, &[0, 1], what);
+        // Geometry alone keeps the picture in the wall: the flat-object split is what cuts.
+        let without = GeometryParams {
+            flat_min_share: 0.0,
+            ..GeometryParams::default()
+        };
+        let seg = segment_with(&r, without);
+        let (wall, _, _) = dominant(&seg, &r, 0);
+        let (picture, _, _) = dominant(&seg, &r, 1);
+        assert_eq!(wall, picture, "{what}: cut without the split");
+    }
+}
+
+#[test]
+fn a_striped_wall_stays_one_segment() {
+    let r = looking_ahead(vec![wall_ahead(Paint::Checker(0.1, BLACK, WHITE))]).render();
+    let seg = segment(&r);
+    let (label, cover, _) = dominant(&seg, &r, 0);
+    assert!(
+        label != 0 && cover > 0.97,
+        "label {label} covers {cover:.3}"
+    );
 }
 
 #[test]
