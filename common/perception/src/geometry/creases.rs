@@ -99,7 +99,11 @@ impl CreaseRules {
             let parts = pixels[a as usize] <= max_pixels && pixels[b as usize] <= max_pixels;
             let (ca, cb) = (colours[a as usize], colours[b as usize]);
             if crease && parts && one_material(ca, cb) {
-                sets.union(a, b);
+                // `union` takes roots: a segment already joined is joined through its root.
+                let (ra, rb) = (sets.find(a), sets.find(b));
+                if ra != rb {
+                    sets.union(ra, rb);
+                }
             }
         }
         regroup(&mut sets, segment_of_patch, count)
@@ -155,6 +159,18 @@ mod tests {
         assert_eq!(seg[0], seg[1], "seat and back are one sofa");
         assert_ne!(seg[0], seg[2], "the box is another colour");
         assert_ne!(seg[1], seg[3], "the floor is a surface, not a part");
+    }
+
+    #[test]
+    fn parts_joined_through_a_shared_part_are_one_object() {
+        // A sofa's arm (0) and back (1) each meet its seat (2) at a crease, not each other;
+        // the wall behind (3) is another colour. Joining seat to arm, then seat to back, must
+        // keep the arm (the union once re-hung the seat under the back and lost the arm).
+        let stats = patches(&[500, 500, 500, 9000], &[FABRIC, FABRIC, FABRIC, [0.5; 3]]);
+        let edges = [edge(0, 2, 40, 0), edge(1, 2, 40, 0)];
+        let (seg, count) = RULES.join(&stats, &edges, &[0, 1, 2, 3], 4);
+        assert_eq!(count, 2, "{seg:?}");
+        assert!(seg[0] == seg[1] && seg[1] == seg[2], "{seg:?}");
     }
 
     #[test]
