@@ -49,6 +49,15 @@ impl UnionFind {
         big
     }
 
+    /// Joins the sets of any two elements; returns the root, and whether they were apart.
+    pub fn join(&mut self, a: u32, b: u32) -> (u32, bool) {
+        let (ra, rb) = (self.find(a), self.find(b));
+        match ra == rb {
+            true => (ra, false),
+            false => (self.union(ra, rb), true),
+        }
+    }
+
     pub fn set_threshold(&mut self, root: u32, value: f32) {
         self.threshold[root as usize] = value;
     }
@@ -70,5 +79,10 @@ mod tests {
         assert_ne!(uf.find(2), uf.find(0));
         let r4 = uf.find(4);
         assert_eq!(uf.threshold(r4), 1.0);
+        // `join` takes any elements: 2 and 4 join through their roots, and 3 stays with 0.
+        assert!(uf.join(2, 4).1);
+        assert!(uf.join(4, 1).1);
+        assert!(!uf.join(3, 2).1);
+        assert_eq!(uf.find(3), uf.find(0));
     }
 }

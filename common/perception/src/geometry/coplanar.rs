@@ -298,7 +298,7 @@ impl CoplanarRules {
         sets.reset(count, 0.0);
         for members in &group {
             for pair in members.windows(2) {
-                sets.union(candidates[pair[0]] as u32, candidates[pair[1]] as u32);
+                sets.join(candidates[pair[0]] as u32, candidates[pair[1]] as u32);
             }
         }
         regroup(&mut sets, segment_of_patch, count)

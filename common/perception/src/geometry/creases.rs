@@ -29,8 +29,8 @@ use super::regions::regroup;
 use crate::classic::union_find::UnionFind;
 
 /// Chromaticity gap and brightness factor within which two sides of a crease are one material.
-const MAX_CHROMA_GAP: f32 = 0.03;
-const MAX_SHADING: f32 = 1.35;
+pub(super) const MAX_CHROMA_GAP: f32 = 0.03;
+pub(super) const MAX_SHADING: f32 = 1.35;
 /// A saturated colour (chromaticity this far from grey) kept within `SAME_HUE_GAP` is one
 /// material up to `SATURATED_SHADING`: a chair's back facing away from the light, 2.05× darker
 /// than its seat at a gap of 0.001. Greys are left out: every grey has one chromaticity.
@@ -99,11 +99,7 @@ impl CreaseRules {
             let parts = pixels[a as usize] <= max_pixels && pixels[b as usize] <= max_pixels;
             let (ca, cb) = (colours[a as usize], colours[b as usize]);
             if crease && parts && one_material(ca, cb) {
-                // `union` takes roots: a segment already joined is joined through its root.
-                let (ra, rb) = (sets.find(a), sets.find(b));
-                if ra != rb {
-                    sets.union(ra, rb);
-                }
+                sets.join(a, b);
             }
         }
         regroup(&mut sets, segment_of_patch, count)

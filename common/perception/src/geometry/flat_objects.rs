@@ -27,12 +27,11 @@
 
 use super::colour::same_colour_within;
 use super::convexity::PatchEdge;
+use super::creases::{MAX_CHROMA_GAP, MAX_SHADING};
 use super::patches::{PatchStats, NO_PATCH};
 use crate::classic::normals::{dot, is_known, sub};
 use crate::classic::union_find::UnionFind;
 
-const MAX_CHROMA_GAP: f32 = 0.03;
-const MAX_SHADING: f32 = 1.35;
 /// RGB distance of two adjacent patches' means within which they are one colour region (a
 /// plain surface's shading changes by less from patch to patch).
 const REGION_STEP: f32 = 0.08;
@@ -108,10 +107,7 @@ impl FlatObjectRules {
             let d = sub(stats[a].colour, stats[b].colour);
             if segment_of_patch[a] == segment_of_patch[b] && dot(d, d) <= REGION_STEP * REGION_STEP
             {
-                let (ra, rb) = (sets.find(e.a), sets.find(e.b));
-                if ra != rb {
-                    sets.union(ra, rb);
-                }
+                sets.join(e.a, e.b);
             }
         }
         let regions = Regions::of(&mut sets, stats, patch_of, width);
