@@ -38,6 +38,9 @@ pub enum Ablation {
     /// Unmapped pixels count in a = I/|ℓs| (§5.5; the paper's table): a segment half over
     /// unmapped space is "other".
     NoUnmappedAbstain,
+    /// Unsegmented pixels count in b = I/|ℓr| and in counter pruning (§5.5; the paper's table):
+    /// a map label that also renders where the segmenter says nothing cannot be a Whole part.
+    NoUnsegmentedAbstain,
     /// No Majority relation (§5.5; not in the paper): a segment that misses the table's
     /// thresholds is "other" even when it and a map label share over half of each.
     NoMajorityMatch,
@@ -53,12 +56,13 @@ pub enum Ablation {
 }
 
 impl Ablation {
-    pub const ALL: [Ablation; 9] = [
+    pub const ALL: [Ablation; 10] = [
         Self::NoCounterPruning,
         Self::NoConfidenceUpdate,
         Self::NoPartDecay,
         Self::NoInsideSplit,
         Self::NoUnmappedAbstain,
+        Self::NoUnsegmentedAbstain,
         Self::NoMajorityMatch,
         Self::NoFragmentAbsorb,
         Self::NoWholeLabelMerge,
@@ -72,6 +76,7 @@ impl Ablation {
             Self::NoPartDecay => "no-part-decay",
             Self::NoInsideSplit => "no-inside-split",
             Self::NoUnmappedAbstain => "no-unmapped-abstain",
+            Self::NoUnsegmentedAbstain => "no-unsegmented-abstain",
             Self::NoMajorityMatch => "no-majority-match",
             Self::NoFragmentAbsorb => "no-fragment-absorb",
             Self::NoWholeLabelMerge => "no-whole-label-merge",
@@ -86,6 +91,7 @@ impl Ablation {
             Self::NoPartDecay => config.enable_part_decay = false,
             Self::NoInsideSplit => config.enable_inside_split = false,
             Self::NoUnmappedAbstain => config.unmapped_pixels_abstain = false,
+            Self::NoUnsegmentedAbstain => config.unsegmented_pixels_abstain = false,
             Self::NoMajorityMatch => config.majority_match = false,
             Self::NoFragmentAbsorb => config.absorb_fragments = false,
             Self::NoWholeLabelMerge => config.merge_whole_labels = false,

@@ -35,6 +35,12 @@ pub struct ConsensusConfig {
     /// is New. Off, an object half over unmapped space is "other" and its unlabelled
     /// Gaussians never get a label.
     pub unmapped_pixels_abstain: bool,
+    /// A departure from the paper (§5.5), the mirror of the one above: b = I/|ℓr| counts only
+    /// the pixels of ℓr where the segmenter gave a label, and counter pruning skips the
+    /// others. Off, a wall whose map label also renders where the frame has no depth (beyond
+    /// the sensor's range) is never a Whole part of the segment of the wall, and stays in
+    /// two labels.
+    pub unsegmented_pixels_abstain: bool,
     /// A departure from the paper (§5.5): a segment with no relation of the table that shares
     /// over half of its mapped pixels with a map label ℓr, and over half of ℓr's pixels, or
     /// that has τ2 of its mapped pixels in ℓr and covers τ3 of it, takes ℓr (Majority). Off,
@@ -77,6 +83,7 @@ impl Default for ConsensusConfig {
             enable_part_decay: true,
             enable_inside_split: true,
             unmapped_pixels_abstain: true,
+            unsegmented_pixels_abstain: true,
             majority_match: true,
             absorb_fragments: true,
             absorb_min_completeness: 0.5,

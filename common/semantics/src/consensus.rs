@@ -5,7 +5,7 @@ use std::collections::{BTreeMap, BTreeSet};
 use crate::actions::{area, conf, Decisions, Evidence};
 use crate::confidence::update_input_confidence;
 use crate::config::ConsensusConfig;
-use crate::consistent_map::{paint, InputPixelRule, PixelRules, RenderedPixelRule};
+use crate::consistent_map::{paint, PixelRules};
 use crate::error::Result;
 use crate::input::{
     input_confidences, rendered_completeness, validate_shapes, RenderedInput, SegmenterInput,
@@ -55,7 +55,8 @@ impl LabelConsensus {
         rendered: &RenderedInput,
     ) -> Result<ConsensusOutput> {
         validate_shapes(input, rendered)?;
-        let overlap = Overlap::count(input.label_map, rendered.label_map);
+        let overlap = Overlap::count(input.label_map, rendered.label_map)
+            .unsegmented_abstain(self.config.unsegmented_pixels_abstain);
         let non_zero =
             |m: &BTreeMap<u32, u32>| m.keys().copied().filter(|&l| l != 0).collect::<Vec<_>>();
         let (input_labels, rendered_labels) = (
@@ -164,9 +165,12 @@ impl LabelConsensus {
         conf_s: &BTreeMap<u32, f32>,
         mut d: Decisions,
     ) -> ConsensusOutput {
-        let mut rules = PixelRules::default();
+        let mut rules = PixelRules {
+            unsegmented_abstain: self.config.unsegmented_pixels_abstain,
+            ..PixelRules::default()
+        };
         for (&s, (_, target)) in &d.targets {
-            let rule = rules.input.entry(s).or_insert_with(InputPixelRule::default);
+            let rule = rules.input.entry(s).or_default();
             match target {
                 LabelTarget::Label(t) => rule.label = *t,
                 LabelTarget::Background => rule.label = 0,
@@ -174,11 +178,7 @@ impl LabelConsensus {
                     rule.take_parts = true;
                     rule.label = largest_part(parts, overlap);
                     for &r in parts {
-                        rules
-                            .rendered
-                            .entry(r)
-                            .or_insert_with(RenderedPixelRule::default)
-                            .part_of = Some(s);
+                        rules.rendered.entry(r).or_default().part_of = Some(s);
                     }
                 }
             }

@@ -34,6 +34,8 @@ pub(crate) struct RenderedPixelRule {
 pub(crate) struct PixelRules {
     pub input: FxHashMap<u32, InputPixelRule>,
     pub rendered: FxHashMap<u32, RenderedPixelRule>,
+    /// Pixels the input leaves 0 join no prune region: they say nothing against ℓr.
+    pub unsegmented_abstain: bool,
 }
 
 /// One pass over the pixels; label lookups happen only when a label changes along the row.
@@ -82,7 +84,7 @@ pub(crate) fn paint(
             }
         }
         if let Some((ls, i)) = ri.full {
-            if s != ls {
+            if s != ls && !(s == 0 && rules.unsegmented_abstain) {
                 prune[i].pixels.push(p);
             }
         }

@@ -14,6 +14,9 @@ pub struct Overlap {
     pub rendered_area: BTreeMap<u32, u32>,
     /// I(ℓs, ℓr) per pair with at least one shared pixel, sorted by (ℓs, ℓr).
     pub pairs: BTreeMap<(u32, u32), u32>,
+    /// Whether b leaves out the pixels of ℓr where the input has no label
+    /// ([`Overlap::unsegmented_abstain`]).
+    pub unsegmented_abstain: bool,
 }
 
 impl Overlap {
@@ -46,13 +49,31 @@ impl Overlap {
         overlap
     }
 
-    /// a = I/|ℓs| and b = I/|ℓr| of a pair (0 when either area is 0).
+    /// b counts only the pixels of ℓr where the input has a label: where the segmenter says
+    /// nothing (no depth, no mask), a rendered label is no evidence against a segment
+    /// (docs/METHOD.md §5.5).
+    pub fn unsegmented_abstain(mut self, on: bool) -> Self {
+        self.unsegmented_abstain = on;
+        self
+    }
+
+    /// |ℓr| as b's denominator: without the pixels where the input is 0 when those abstain.
+    pub fn rendered_segmented_area(&self, r: u32) -> u32 {
+        let area = self.rendered_area.get(&r).copied().unwrap_or(0);
+        match self.unsegmented_abstain {
+            true => area - self.pairs.get(&(0, r)).copied().unwrap_or(0),
+            false => area,
+        }
+    }
+
+    /// a = I/|ℓs| and b = I/|ℓr| of a pair (0 when either area is 0); |ℓr| without the
+    /// unsegmented pixels when those abstain.
     pub fn ratios(&self, s: u32, r: u32) -> (f64, f64) {
         let i = f64::from(self.pairs.get(&(s, r)).copied().unwrap_or(0));
         let area = |a: Option<&u32>| a.copied().map_or(0.0, f64::from);
         let (ns, nr) = (
             area(self.input_area.get(&s)),
-            area(self.rendered_area.get(&r)),
+            f64::from(self.rendered_segmented_area(r)),
         );
         let div = |x: f64, n: f64| if n > 0.0 { x / n } else { 0.0 };
         (div(i, ns), div(i, nr))

@@ -10,6 +10,15 @@ fn config() -> ConsensusConfig {
     ConsensusConfig::default()
 }
 
+/// Rows without a segment stand for other objects in some scenes below, so they count in b
+/// (by default they abstain, docs/METHOD.md §5.5).
+fn counted() -> ConsensusConfig {
+    ConsensusConfig {
+        unsegmented_pixels_abstain: false,
+        ..config()
+    }
+}
+
 #[test]
 fn full_match_takes_rendered_label_and_max_confidence() {
     // (C_r before, C_s, C_r after)
@@ -108,14 +117,17 @@ fn a_winning_part_that_holds_most_of_the_label_keeps_it() {
             scope: RelabelScope::Pixels,
         }]
     );
-    // Alone, such a part keeps the label: nothing splits.
+    // Alone, such a part keeps the label: nothing splits (a Partial part with the rows
+    // 14..20 counted; by default those rows, without a segment, abstain and it is Full).
     let mut lone = Scene::new(20, 20);
     lone.rendered_rows(0..20, 1).input_rows(0..14, 10, 0.9);
-    let mut consensus = consensus_with(&[0.5], config());
-    let out = lone.run(&mut consensus);
-    assert_eq!(out.assignments[0].relation, Relation::Partial);
-    assert_eq!(out.target_of(10), Some(&LabelTarget::Label(1)));
-    assert!(out.relabels.is_empty());
+    for (config, relation) in [(counted(), Relation::Partial), (config(), Relation::Full)] {
+        let mut consensus = consensus_with(&[0.5], config);
+        let out = lone.run(&mut consensus);
+        assert_eq!(out.assignments[0].relation, relation);
+        assert_eq!(out.target_of(10), Some(&LabelTarget::Label(1)));
+        assert!(out.relabels.is_empty());
+    }
     // Another piece that stays on 1 (C_s 0.3 < C_r) holds τ3 of it: two objects the map
     // merged. The winner takes a fresh label as in the paper, so they come apart.
     let mut merged = Scene::new(20, 20);
@@ -249,6 +261,65 @@ fn whole_input_loses_takes_rendered_parts() {
     assert_relative_eq!(conf(&consensus, 2), 0.44);
 }
 
+/// A wall's segment (input 20, rows 0..10, C_s 0.6) over two map labels of the wall: 1 on
+/// rows 0..5 (C 0.4), 2 on rows 5..14, rows 10..14 of it where the frame has no depth (input 0:
+/// beyond the sensor's range, mapped from nearer views).
+fn wall_beyond_depth_scene() -> Scene {
+    let mut scene = Scene::new(20, 20);
+    scene.input_rows(0..10, 20, 0.6);
+    scene.rendered_rows(0..5, 1).rendered_rows(5..14, 2);
+    scene
+}
+
+#[test]
+fn a_label_that_renders_beyond_the_frames_depth_is_a_whole_part_of_its_wall() {
+    // b(2) = 100/100 over the segmented pixels: 1 and 2 are Whole parts; C̄r = (0.4·100 +
+    // 0.5·180)/280 = 0.46 < C_s: they merge into 2, the larger.
+    let scene = wall_beyond_depth_scene();
+    let mut consensus = consensus_with(&[0.4, 0.5], config());
+    let out = scene.run(&mut consensus);
+    assert_eq!(out.assignments[0].relation, Relation::Whole);
+    assert_eq!(out.target_of(20), Some(&LabelTarget::Label(2)));
+    assert_eq!(out.relabels.len(), 1);
+    assert_eq!((out.relabels[0].from, out.relabels[0].to), (1, 2));
+    assert!(out.consistent_label_map[..200].iter().all(|&l| l == 2));
+    // Counted, b(2) = 100/180: 2 is no part, 1 merges with nothing, and the wall keeps both.
+    let mut consensus = consensus_with(
+        &[0.4, 0.5],
+        ConsensusConfig {
+            unsegmented_pixels_abstain: false,
+            ..config()
+        },
+    );
+    let out = scene.run(&mut consensus);
+    assert_eq!(out.target_of(20), Some(&LabelTarget::Label(1)));
+    assert!(out.relabels.iter().all(|r| r.from != 2 && r.to != 2));
+}
+
+#[test]
+fn pixels_without_a_segment_prune_no_counter_gaussians() {
+    // Input 20 rows 0..10, its Full partner 1 on rows 0..11: row 10 has no segment (input 0).
+    let mut scene = Scene::new(20, 20);
+    scene.input_rows(0..10, 20, 0.9);
+    scene.rendered_rows(0..11, 1);
+    let mut consensus = consensus_with(&[0.5], config());
+    let out = scene.run(&mut consensus);
+    assert_eq!(out.assignments[0].relation, Relation::Full);
+    assert!(out.counter_pruning.is_empty());
+    // Counted (b = 200/220, still Full): row 10 is a counter region of 1.
+    let mut consensus = consensus_with(
+        &[0.5],
+        ConsensusConfig {
+            unsegmented_pixels_abstain: false,
+            ..config()
+        },
+    );
+    let out = scene.run(&mut consensus);
+    assert_eq!(out.assignments[0].relation, Relation::Full);
+    assert_eq!(out.counter_pruning.len(), 1);
+    assert_eq!(out.counter_pruning[0].pixels, scene.rows(10..11));
+}
+
 #[test]
 fn new_segments_get_increasing_fresh_labels() {
     // Table holds 1..=3; inputs 31 and 30 over unmapped space get 4 and 5 in input-label order.
@@ -271,7 +342,7 @@ fn other_sends_pixels_to_background() {
     let mut scene = Scene::new(20, 20);
     scene.input_rows(5..15, 9, 0.9).input_rows(0..5, 8, 0.9);
     scene.rendered_rows(0..10, 1).rendered_rows(10..20, 2);
-    let mut consensus = consensus_with(&[0.5, 0.5], config());
+    let mut consensus = consensus_with(&[0.5, 0.5], counted());
     let out = scene.run(&mut consensus);
     assert_eq!(out.target_of(9), Some(&LabelTarget::Background));
     // Input 8 (rows 0..5) is a Partial part of 1: a = 1, b = 0.5.
@@ -417,7 +488,8 @@ fn without_the_inside_relation_an_absorbed_object_stays_absorbed() {
 /// A chair's label 1 (rows 0..15, 300 px) that absorbed a ball; the chair's segment 10 (rows
 /// 5..17) holds it by Majority (a = 200/240 = 0.83, b = 200/300 = 0.67: no relation of the
 /// table) and spills onto floor label 4 (rows 15..18, b = 40/60); `ball_rows` of input 11
-/// lie inside 1.
+/// lie inside 1. The rows without a segment stand for other objects: the tests count them
+/// ([`counted`]).
 fn majority_held_scene(ball_rows: std::ops::Range<usize>) -> Scene {
     let mut scene = Scene::new(20, 20);
     scene.rendered_rows(0..15, 1).rendered_rows(15..18, 4);
@@ -432,7 +504,7 @@ fn inside_a_label_another_segment_holds_by_majority_splits_off() {
     // The ball (row 0: a = 1, b = 20/300 < τ3) has no relation of the table; the chair's
     // segment holds label 1 without it, so the ball is Inside: fresh label 5, relabel 1 → 5.
     let scene = majority_held_scene(0..1);
-    let mut consensus = consensus_with(&[0.9, 0.9, 0.9, 0.9], config());
+    let mut consensus = consensus_with(&[0.9, 0.9, 0.9, 0.9], counted());
     let out = scene.run(&mut consensus);
     assert_eq!(out.target_of(10), Some(&LabelTarget::Label(1)));
     let ball = out.assignments.iter().find(|a| a.input_label == 11);
@@ -455,7 +527,7 @@ fn a_label_mostly_out_of_view_is_held_by_no_majority() {
     // sharing most of it is one piece of many, and the ball stays background, as before.
     let mut scene = majority_held_scene(0..1);
     scene.completeness(1, 0.3);
-    let mut consensus = consensus_with(&[0.9, 0.9, 0.9, 0.9], config());
+    let mut consensus = consensus_with(&[0.9, 0.9, 0.9, 0.9], counted());
     let out = scene.run(&mut consensus);
     assert_eq!(out.target_of(11), Some(&LabelTarget::Background));
     assert!(out.relabels.is_empty());
@@ -466,7 +538,7 @@ fn a_piece_touching_the_segment_that_holds_its_label_is_no_inside() {
     // Row 4 meets the chair's segment (rows 5..17): a piece of the same surface the segmenter
     // cut off (a floor between table legs), not an object apart. No split: background.
     let scene = majority_held_scene(4..5);
-    let mut consensus = consensus_with(&[0.9, 0.9, 0.9, 0.9], config());
+    let mut consensus = consensus_with(&[0.9, 0.9, 0.9, 0.9], counted());
     let out = scene.run(&mut consensus);
     assert_eq!(out.target_of(11), Some(&LabelTarget::Background));
     assert!(out.relabels.is_empty());
@@ -477,7 +549,7 @@ fn a_tenth_of_a_majority_held_label_is_still_a_partial_part() {
     // Rows 0..2 are 40/300 = 0.13 ≥ τ3 of label 1: a Partial part, and the confident map
     // keeps it on 1. A segmenter's pieces of one object are no Inside.
     let scene = majority_held_scene(0..2);
-    let mut consensus = consensus_with(&[0.95, 0.9, 0.9, 0.9], config());
+    let mut consensus = consensus_with(&[0.95, 0.9, 0.9, 0.9], counted());
     let out = scene.run(&mut consensus);
     let ball = out.assignments.iter().find(|a| a.input_label == 11);
     assert_eq!(ball.map(|a| a.relation), Some(Relation::Partial));
@@ -496,7 +568,7 @@ fn inside_two_held_labels_splits_off_from_both() {
         .rendered_span(14..20, 2)
         .rendered_rows(18..20, 2)
         .input_rows(18..20, 12, 0.9);
-    let mut consensus = consensus_with(&[0.9, 0.9, 0.9, 0.9], config());
+    let mut consensus = consensus_with(&[0.9, 0.9, 0.9, 0.9], counted());
     let out = scene.run(&mut consensus);
     assert_eq!(out.target_of(12), Some(&LabelTarget::Label(2)));
     let ball = out.assignments.iter().find(|a| a.input_label == 11);
@@ -512,7 +584,7 @@ fn inside_two_held_labels_splits_off_from_both() {
     // Without the Inside relation the ball is background.
     let config_off = ConsensusConfig {
         enable_inside_split: false,
-        ..config()
+        ..counted()
     };
     let mut off = consensus_with(&[0.9, 0.9, 0.9, 0.9], config_off);
     assert_eq!(
@@ -568,7 +640,7 @@ fn with_unmapped_pixels_counted_the_object_falls_to_background_for_good() {
     let scene = half_unmapped_scene();
     let config = ConsensusConfig {
         unmapped_pixels_abstain: false,
-        ..config()
+        ..counted()
     };
     let mut consensus = consensus_with(&[0.5, 0.5, 0.5, 0.5, 0.9], config);
     let out = scene.run(&mut consensus);

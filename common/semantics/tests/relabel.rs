@@ -175,9 +175,13 @@ fn bad_indices_are_errors_and_change_nothing() {
 
 #[test]
 fn full_match_prune_region_is_the_symmetric_difference() {
-    // 20×5 grid: input 10 on pixels 0..90, rendered 1 on 5..95 → a = b = 85/90: Full.
+    // 20×5 grid: input 10 on pixels 0..90, rendered 1 on 5..95 → a = b = 85/90: Full; input
+    // 11 on 90..100 (pixels without a segment would say nothing, docs/METHOD.md §5.5).
     let mut scene = Scene::new(20, 5);
-    scene.input_span(0..90, 10, 0.9).rendered_span(5..95, 1);
+    scene
+        .input_span(0..90, 10, 0.9)
+        .input_span(90..100, 11, 0.9)
+        .rendered_span(5..95, 1);
     let mut consensus = consensus_with(&[0.5], ConsensusConfig::default());
     let out = scene.run(&mut consensus);
     let expected: Vec<u32> = (0..5).chain(90..95).collect();

@@ -27,6 +27,15 @@ fn run_case(case: &Case, config: &ConsensusConfig) -> Relation {
     out.assignments[0].relation
 }
 
+/// Rendered-only pixels (input 0) stand for the label's pixels over other segments in most
+/// cases here, so they count in b (by default they abstain, docs/METHOD.md §5.5).
+fn counted() -> ConsensusConfig {
+    ConsensusConfig {
+        unsegmented_pixels_abstain: false,
+        ..ConsensusConfig::default()
+    }
+}
+
 /// Asserts every case's relation under `config`.
 fn check(cases: &[Case], config: &ConsensusConfig) {
     for case in cases {
@@ -34,12 +43,14 @@ fn check(cases: &[Case], config: &ConsensusConfig) {
     }
 }
 
-/// The paper's table: input-only pixels (rendered 0) count in a = I/|ℓs|.
+/// The paper's table: input-only pixels (rendered 0) count in a = I/|ℓs|, rendered-only
+/// pixels (input 0) in b = I/|ℓr|.
 #[test]
 fn relation_boundaries_on_both_sides() {
     use Relation::*;
     let paper = ConsensusConfig {
         unmapped_pixels_abstain: false,
+        unsegmented_pixels_abstain: false,
         majority_match: false,
         ..ConsensusConfig::default()
     };
@@ -96,7 +107,7 @@ fn unmapped_pixels_abstain_boundaries() {
     // The Majority relation (tested below) would take the two "other" cases.
     let abstain_only = ConsensusConfig {
         majority_match: false,
-        ..ConsensusConfig::default()
+        ..counted()
     };
     check(&cases, &abstain_only);
 }
@@ -120,16 +131,44 @@ fn majority_boundaries() {
         Case { name: "b below τ3", s_only: 100, shared: 20, r_only: 200, expected: Other },
         Case { name: "b = τ3", s_only: 100, shared: 20, r_only: 180, expected: Majority },
     ];
-    check(&cases, &ConsensusConfig::default());
+    check(&cases, &counted());
+}
+
+/// The default: rendered pixels where the input is 0 (no depth, no mask) abstain from
+/// b = I/|ℓr|, the mirror of the unmapped pixels in a.
+#[test]
+fn unsegmented_pixels_abstain_boundaries() {
+    use Relation::*;
+    #[rustfmt::skip]
+    let cases = [
+        // b = 340/340 over the segmented pixels (340/540 over all): Full.
+        Case { name: "label beyond the segment's depth", s_only: 0, shared: 340, r_only: 200, expected: Full },
+        // a = 340/400 = τ1 (1 over the mapped pixels) with b = 1: Full.
+        Case { name: "a = τ1", s_only: 60, shared: 340, r_only: 61, expected: Full },
+        Case { name: "new: no overlap", s_only: 400, shared: 0, r_only: 100, expected: New },
+    ];
+    let no_majority = ConsensusConfig {
+        majority_match: false,
+        ..ConsensusConfig::default()
+    };
+    check(&cases, &no_majority);
+    // Counted, as the paper does: b = 340/540 makes the first a Partial part, the second other.
+    let paper = ConsensusConfig {
+        majority_match: false,
+        ..counted()
+    };
+    assert_eq!(run_case(&cases[0], &paper), Partial);
+    assert_eq!(run_case(&cases[1], &paper), Other);
 }
 
 #[test]
 fn a_majority_segment_takes_the_label_and_changes_nothing_else() {
-    // Input 1: rows 0..10, rendered 1 rows 3..16: a = 0.7 (1 over its 7 mapped rows), b = 7/13.
+    // Input 1: rows 0..10, rendered 1 rows 3..16: a = 0.7 (1 over its 7 mapped rows), b = 7/13
+    // (rows 10..16 stand for another object: counted).
     let mut scene = Scene::new(20, 20);
     scene.input_rows(0..10, 1, 0.9);
     scene.rendered_rows(3..16, 1);
-    let mut consensus = consensus_with(&[0.4], ConsensusConfig::default());
+    let mut consensus = consensus_with(&[0.4], counted());
     let out = scene.run(&mut consensus);
     assert_eq!(out.assignments[0].relation, Relation::Majority);
     // All its pixels, mapped or not, take label 1; the rest stays 0.
@@ -140,7 +179,7 @@ fn a_majority_segment_takes_the_label_and_changes_nothing_else() {
     assert_eq!(consensus.table().confidence(1), 0.4);
     let paper = ConsensusConfig {
         majority_match: false,
-        ..ConsensusConfig::default()
+        ..counted()
     };
     let mut consensus = consensus_with(&[0.4], paper);
     assert_eq!(
@@ -182,11 +221,12 @@ fn full_has_priority_over_whole() {
 
 #[test]
 fn other_when_segment_straddles_two_labels() {
-    // Input rows 5..15 cover half of rendered 1 (rows 0..10) and half of rendered 2.
+    // Input rows 5..15 cover half of rendered 1 (rows 0..10) and half of rendered 2 (the rows
+    // without a segment stand for other objects: counted).
     let mut scene = Scene::new(20, 20);
     scene.input_rows(5..15, 9, 0.9);
     scene.rendered_rows(0..10, 1).rendered_rows(10..20, 2);
-    let mut consensus = consensus_with(&[0.5, 0.5], ConsensusConfig::default());
+    let mut consensus = consensus_with(&[0.5, 0.5], counted());
     let out = scene.run(&mut consensus);
     assert_eq!(out.assignments[0].relation, Relation::Other);
     assert!(out.consistent_label_map.iter().all(|&l| l == 0));
