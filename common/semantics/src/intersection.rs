@@ -61,7 +61,7 @@ impl Overlap {
     pub fn rendered_segmented_area(&self, r: u32) -> u32 {
         let area = self.rendered_area.get(&r).copied().unwrap_or(0);
         match self.unsegmented_abstain {
-            true => area - self.pairs.get(&(0, r)).copied().unwrap_or(0),
+            true => area.saturating_sub(self.pairs.get(&(0, r)).copied().unwrap_or(0)),
             false => area,
         }
     }
