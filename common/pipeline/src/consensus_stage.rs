@@ -195,6 +195,19 @@ struct ConsensusStage {
     answered: BTreeSet<u64>,
     /// Restarted: the first keyframe answered after the restart is still to be reported.
     resumed: bool,
+    /// Restarted: the predecessor's newest answer, to be given again (see [`RedoAnswer`]).
+    redo: Option<RedoAnswer>,
+}
+
+/// The newest answer's keyframe and the table from before it. The answer can die with the
+/// process before the mapper reads it (a sample in a dead sender's memory is lost), and the map
+/// then lacks every label it made; the restarted consensus answers that keyframe again from
+/// this table, so with the same ids (the consensus is deterministic), and the mapper skips the
+/// repeat when it had the first.
+#[derive(serde::Serialize, serde::Deserialize)]
+struct RedoAnswer {
+    seq: u64,
+    table_before: GlobalLabelTable,
 }
 
 /// What `consensus_progress.json` keeps: the keyframes answered and the table after them, in
@@ -210,6 +223,9 @@ struct ConsensusProgress {
     /// comes from `label_table.json`.
     #[serde(default)]
     table: Option<GlobalLabelTable>,
+    /// The newest answer, to be given again after a restart. Absent in files of older runs.
+    #[serde(default)]
+    redo: Option<RedoAnswer>,
 }
 
 impl ConsensusProgress {
@@ -318,9 +334,14 @@ impl ConsensusStage {
             };
             if self.answered.contains(&seq) {
                 // Service history hands a restarted consensus what its predecessor answered.
-                tracing::debug!("keyframe #{seq}: answered already");
+                match self.redo.take_if(|r| r.seq == seq) {
+                    Some(redo) => self.answer_again(redo, &seg, &render)?,
+                    None => tracing::debug!("keyframe #{seq}: answered already"),
+                }
                 continue;
             }
+            // A new answer changes the table: the predecessor's can no longer be repeated.
+            self.redo = None;
             if std::mem::take(&mut self.resumed) {
                 tracing::warn!(
                     "restarted: first keyframe answered #{seq}; the last before the restart was \
@@ -334,12 +355,38 @@ impl ConsensusStage {
         Ok(())
     }
 
+    /// Gives the predecessor's newest answer again ([`RedoAnswer`]): from the table before it,
+    /// which then ends where the predecessor's did.
+    fn answer_again(
+        &mut self,
+        redo: RedoAnswer,
+        seg: &OwnedSegments,
+        render: &OwnedRender,
+    ) -> anyhow::Result<()> {
+        let seq = redo.seq;
+        tracing::info!(
+            "keyframe #{seq}: the predecessor's last answer, given again (it may have died \
+             with it before the mapper read it)"
+        );
+        let after = self.consensus.table().clone();
+        let config = self.consensus.config().clone();
+        self.consensus = LabelConsensus::with_table(config, redo.table_before)?;
+        self.process(seg, render)?;
+        if self.consensus.table() != &after {
+            tracing::warn!(
+                "keyframe #{seq}: answered again, the table differs from the one saved after it"
+            );
+        }
+        Ok(())
+    }
+
     /// Records `seq` as answered, with the table after it in the same file, once its answer
     /// is sent. Killed in between, the restarted process answers `seq` again from the service
     /// history with the table from before it, so it allocates the same ids (the consensus is
     /// deterministic) and the mapper skips the repeat; a table saved apart from the answered
-    /// set would allocate every New label of `seq` a second time.
-    fn persist_answered(&mut self, seq: u64) -> anyhow::Result<()> {
+    /// set would allocate every New label of `seq` a second time. Killed after, it answers
+    /// `seq` again all the same ([`RedoAnswer`]), from `table_before`.
+    fn persist_answered(&mut self, seq: u64, table_before: GlobalLabelTable) -> anyhow::Result<()> {
         self.last_answered = Some(self.last_answered.map_or(seq, |l| l.max(seq)));
         self.answered.insert(seq);
         while self.answered.len() > ANSWERED_KEPT {
@@ -349,6 +396,7 @@ impl ConsensusStage {
             last_answered: self.last_answered.unwrap_or(seq),
             answered: Some(self.answered.iter().copied().collect()),
             table: Some(self.consensus.table().clone()),
+            redo: Some(RedoAnswer { seq, table_before }),
         })?;
         let run = RunDir::new(&self.out_dir);
         let path = run.consensus_progress();
@@ -376,12 +424,13 @@ impl ConsensusStage {
             label_map: &render.label_map,
             completeness: &render.completeness,
         };
+        let table_before = self.consensus.table().clone();
         let out = match self.consensus.process(&input, &rendered) {
             Ok(o) => o,
             Err(e) => {
                 tracing::error!("keyframe #{seq}: consensus refused the inputs: {e}");
                 self.telemetry.dropped(&seg.stamp);
-                return self.persist_answered(seq);
+                return self.persist_answered(seq, table_before);
             }
         };
         let wire = WireResult::new(&out);
@@ -392,7 +441,7 @@ impl ConsensusStage {
         let header =
             ConsensusHeader::new(stamp, seg.width as u32, seg.height as u32, theta, &parts);
         self.out.send(header, |hd, buf| hd.encode(&parts, buf))?;
-        self.persist_answered(seq)?;
+        self.persist_answered(seq, table_before)?;
         tracing::info!(
             "keyframe #{seq}: {} input labels → {} global labels, {} relabel regions, {} counter regions",
             out.assignments.len(),
@@ -526,6 +575,7 @@ pub fn run_consensus(ctx: &RunContext, out_dir: &Path, args: &ConsensusArgs) -> 
         None => LabelConsensus::new(config)?,
     };
     let resumed_from = progress.as_ref().map(|p| p.last_answered);
+    let redo = progress.as_mut().and_then(|p| p.redo.take());
     std::fs::create_dir_all(out_dir)?;
     if !args.no_segment_pngs {
         std::fs::create_dir_all(RunDir::new(out_dir).segments_dir())?;
@@ -544,6 +594,7 @@ pub fn run_consensus(ctx: &RunContext, out_dir: &Path, args: &ConsensusArgs) -> 
         last_answered: resumed_from,
         answered: progress.map(|p| p.answered()).unwrap_or_default(),
         resumed: resumed_from.is_some(),
+        redo,
     };
     let ws = waitset()?;
     let _g1 = ws
@@ -594,5 +645,71 @@ mod tests {
         let old: ConsensusProgress =
             serde_json::from_str(r#"{"last_answered": 3}"#).expect("parses");
         assert_eq!(old.answered(), BTreeSet::from([0, 1, 2, 3]));
+    }
+
+    #[test]
+    fn the_newest_answer_given_again_from_the_table_before_it_is_the_same_answer() {
+        // 4×2 pixels: keyframe 1 sees objects 1 and 2 in an empty map; keyframe 2 sees object 2
+        // (rendered as global label 2 where keyframe 1 put it) and a new object 3.
+        let one = [1, 1, 2, 2, 1, 1, 2, 2];
+        let two = [2, 2, 3, 3, 2, 2, 3, 3];
+        let rendered_two = [2, 2, 0, 0, 2, 2, 0, 0];
+        let confidence = BTreeMap::from([(1, 0.9), (2, 0.9), (3, 0.9)]);
+        let classes = BTreeMap::new();
+        let input = |label_map| SegmenterInput {
+            width: 4,
+            height: 2,
+            label_map,
+            confidence: &confidence,
+            classes: &classes,
+        };
+        let completeness = BTreeMap::from([(2, 1.0)]);
+        let mut consensus = LabelConsensus::new(ConsensusConfig::default()).expect("config");
+        let empty = BTreeMap::new();
+        let first = consensus
+            .process(
+                &input(&one),
+                &RenderedInput {
+                    label_map: &[0; 8],
+                    completeness: &empty,
+                },
+            )
+            .expect("keyframe 1");
+        assert_eq!(first.consistent_label_map, [1, 1, 2, 2, 1, 1, 2, 2]);
+        let rendered = RenderedInput {
+            label_map: &rendered_two,
+            completeness: &completeness,
+        };
+        // What persist_answered writes for keyframe 2, read back as a restart reads it.
+        let table_before = consensus.table().clone();
+        let answer = consensus
+            .process(&input(&two), &rendered)
+            .expect("keyframe 2");
+        let saved = serde_json::to_vec(&ConsensusProgress {
+            last_answered: 2,
+            answered: Some(vec![1, 2]),
+            table: Some(consensus.table().clone()),
+            redo: Some(RedoAnswer {
+                seq: 2,
+                table_before,
+            }),
+        })
+        .expect("serialises");
+        let restart: ConsensusProgress = serde_json::from_slice(&saved).expect("parses");
+        let redo = restart.redo.expect("the newest answer is kept");
+        assert_eq!(redo.seq, 2);
+        let mut again = LabelConsensus::with_table(ConsensusConfig::default(), redo.table_before)
+            .expect("table");
+        let repeat = again.process(&input(&two), &rendered).expect("again");
+        // Object 3 gets the same fresh id both times, and the table ends where it ended.
+        assert_eq!(repeat, answer);
+        assert_eq!(answer.consistent_label_map, [2, 2, 3, 3, 2, 2, 3, 3]);
+        assert_eq!(Some(again.table()), restart.table.as_ref());
+        // Answered from the table after it instead, object 3 would take a second id.
+        let mut after =
+            LabelConsensus::with_table(ConsensusConfig::default(), consensus.into_table())
+                .expect("table");
+        let twice = after.process(&input(&two), &rendered).expect("twice");
+        assert_ne!(twice.consistent_label_map, answer.consistent_label_map);
     }
 }
