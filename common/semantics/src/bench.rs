@@ -118,7 +118,7 @@ pub fn print_consensus_bench(runs: usize) {
     }
     times.sort_by(f64::total_cmp);
     let median = times[runs / 2];
-    match last {
+    match &last {
         Some(Ok(out)) => {
             let mut relations = BTreeMap::new();
             for a in &out.assignments {
@@ -143,7 +143,69 @@ pub fn print_consensus_bench(runs: usize) {
         times[0],
         times[runs - 1]
     );
+    if let Some(Ok(out)) = &last {
+        application(out, &rendered_map, runs);
+    }
     worst_case(&prepared, &mut rng, runs);
+}
+
+/// What the mapper does with the answer: the counter-pruning selection over a render's
+/// top-K (a Gaussian every 2 pixels each way, 16 per pixel: those of the 4×4 cells around
+/// it, labelled by the rendered map at their centre), tile row by tile row and, side by
+/// side, pixel by pixel.
+fn application(out: &crate::ConsensusOutput, rendered_map: &[u32], runs: usize) {
+    const STEP: usize = 2;
+    let (gw, gh) = (W / STEP, H / STEP);
+    let lists: Vec<Vec<(u32, f32)>> = (0..W * H)
+        .map(|p| {
+            let (cx, cy) = ((p % W) / STEP, (p / W) / STEP);
+            let (x0, y0) = (cx.saturating_sub(1), cy.saturating_sub(1));
+            (y0..(y0 + 4).min(gh))
+                .flat_map(|y| (x0..(x0 + 4).min(gw)).map(move |x| ((y * gw + x) as u32, 0.05)))
+                .collect()
+        })
+        .collect();
+    let top_k = opengs_splat::TopK::from_lists(W as u32, H as u32, &lists);
+    let labels: Vec<u32> = (0..gw * gh)
+        .map(|g| rendered_map[(g / gw) * STEP * W + (g % gw) * STEP])
+        .collect();
+    let scale = |g: usize| 0.02 + 0.02 * (g % 7) as f32;
+    let theta = ConsensusConfig::default().counter_prune_scale;
+    let regions = &out.counter_pruning;
+    let pixels: usize = regions.iter().map(|r| r.pixels.len()).sum();
+    let time = |per_pixel: bool| {
+        let mut times: Vec<f64> = (0..runs)
+            .map(|_| {
+                let start = Instant::now();
+                let selected = match per_pixel {
+                    true => crate::select_counter_gaussians_per_pixel(
+                        &top_k, &labels, scale, theta, regions,
+                    ),
+                    false => {
+                        crate::select_counter_gaussians(&top_k, &labels, scale, theta, regions)
+                    }
+                };
+                let elapsed = start.elapsed().as_secs_f64() * 1e3;
+                std::hint::black_box(selected.map(|s| s.len()).unwrap_or(0));
+                elapsed
+            })
+            .collect();
+        times.sort_by(f64::total_cmp);
+        times[times.len() / 2]
+    };
+    let (rows, per_pixel) = (time(false), time(true));
+    let selected = crate::select_counter_gaussians(&top_k, &labels, scale, theta, regions)
+        .map_or(0, |s| s.len());
+    println!(
+        "counter pruning in the mapper ({} regions, {pixels} pixels, {} of {} Gaussians \
+         selected, top-{}): median {rows:.3} ms by tile rows, {per_pixel:.3} ms pixel by \
+         pixel ({:.1}×)",
+        regions.len(),
+        selected,
+        labels.len(),
+        top_k.k,
+        per_pixel / rows.max(1e-9)
+    );
 }
 
 /// Salt-and-pepper maps (a new (ℓs, ℓr) pair at almost every pixel): the hashing worst case.

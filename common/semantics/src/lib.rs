@@ -62,7 +62,7 @@ mod relation;
 pub use confidence::update_input_confidence;
 pub use config::ConsensusConfig;
 pub use consensus::LabelConsensus;
-pub use counter_pruning::select_counter_gaussians;
+pub use counter_pruning::{select_counter_gaussians, select_counter_gaussians_per_pixel};
 pub use error::{Result, SemanticsError};
 pub use input::{InputLabelClass, RenderedInput, SegmenterInput};
 pub use intersection::Overlap;

@@ -12,6 +12,26 @@ pub fn validate_regions<'p>(
     gaussians: usize,
     regions: impl Iterator<Item = &'p [u32]>,
 ) -> Result<()> {
+    for region in regions {
+        for (y, tile_x, lanes) in tile_rows(top_k, region)? {
+            if let Some(id) = top_k
+                .ids_kept_in_tile_row(y, tile_x, lanes)
+                .find(|&id| id as usize >= gaussians)
+            {
+                return Err(SemanticsError::GaussianOutOfRange { id, gaussians });
+            }
+        }
+    }
+    Ok(())
+}
+
+/// [`validate_regions`] read pixel by pixel: the twin [`crate::select_counter_gaussians_per_pixel`]
+/// checks with.
+pub(crate) fn validate_regions_per_pixel<'p>(
+    top_k: &TopK,
+    gaussians: usize,
+    regions: impl Iterator<Item = &'p [u32]>,
+) -> Result<()> {
     let pixels = top_k.pixel_count();
     for region in regions {
         for &p in region {
@@ -27,6 +47,30 @@ pub fn validate_regions<'p>(
         }
     }
     Ok(())
+}
+
+/// A region's pixels gathered by tile row, `(image row, tile, lane bits)`, for
+/// [`TopK::ids_kept_in_tile_row`]: one scan of a tile row's visits serves all its pixels
+/// (docs/METHOD.md §5.3). Errors on a pixel outside the render.
+pub(crate) fn tile_rows(top_k: &TopK, pixels: &[u32]) -> Result<Vec<(u32, u32, u32)>> {
+    let count = top_k.pixel_count();
+    let (width, tile) = (top_k.width.max(1), opengs_splat::TILE_SIZE);
+    let mut rows: Vec<(u32, u32, u32)> = Vec::new();
+    for &p in pixels {
+        if p as usize >= count {
+            return Err(SemanticsError::PixelOutOfRange {
+                pixel: p,
+                pixels: count,
+            });
+        }
+        let (x, y) = (p % width, p / width);
+        let (tile_x, lane) = (x / tile, 1u32 << (x % tile));
+        match rows.last_mut() {
+            Some((ry, rt, lanes)) if (*ry, *rt) == (y, tile_x) => *lanes |= lane,
+            _ => rows.push((y, tile_x, lane)),
+        }
+    }
+    Ok(rows)
 }
 
 /// Applies relabel instructions in order: in each listed pixel's top-K (or, for
@@ -75,11 +119,13 @@ pub fn apply_relabels_centred(
         for &p in &instruction.pixels {
             in_region[p as usize] = true; // in range: validated above
         }
-        for &p in &instruction.pixels {
-            for id in top_k.gaussians_at(p as usize) {
+        for (y, tile_x, lanes) in tile_rows(top_k, &instruction.pixels)? {
+            for id in top_k.ids_kept_in_tile_row(y, tile_x, lanes) {
                 let label = &mut labels[id as usize]; // in range: validated above
-                let centred = centre_pixel(id).is_none_or(|c| in_region.get(c) == Some(&true));
-                if *label == instruction.from && centred {
+                if *label != instruction.from {
+                    continue;
+                }
+                if centre_pixel(id).is_none_or(|c| in_region.get(c) == Some(&true)) {
                     *label = instruction.to;
                     changed += 1;
                 }

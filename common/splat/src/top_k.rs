@@ -183,6 +183,34 @@ impl TopK {
         }
     }
 
+    /// The Gaussian ids kept in the top-K of any of the pixels `lanes` (bit x: pixel
+    /// 16·`tile_x` + x) of image row `y`, front to back, each visit once: pixels of one
+    /// tile row share its visits, so one scan serves them all, where [`TopK::pixel`] scans
+    /// them once per pixel and decodes weights. An id the row's renderer met twice is
+    /// yielded twice.
+    pub fn ids_kept_in_tile_row(
+        &self,
+        y: u32,
+        tile_x: u32,
+        lanes: u32,
+    ) -> impl Iterator<Item = u32> + '_ {
+        assert!(
+            y < self.height && tile_x < self.tiles_x,
+            "tile row ({tile_x}, {y}) outside {}x{}",
+            self.width,
+            self.height
+        );
+        let span = self.rows[self.row_index(tile_x * T, y)];
+        let band = &self.bands[(y / T) as usize];
+        let (s, n) = (span.visits as usize, span.len as usize);
+        let kept = (lanes & REACHED) << KEPT_SHIFT;
+        band.ids[s..s + n]
+            .iter()
+            .zip(&band.lanes[s..s + n])
+            .filter(move |&(_, &l)| l & kept != 0)
+            .map(|(&id, _)| id)
+    }
+
     /// Pixel (x, y)'s top-K heaviest first (ties: the front one first).
     pub fn pixel_sorted(&self, x: u32, y: u32) -> Vec<(u32, f32)> {
         let entries: Vec<(u32, f32)> = self.pixel(x, y).collect();
@@ -394,6 +422,38 @@ mod tests {
         assert_eq!(t.pixel(3, 0).count(), 0);
         assert_eq!(t.pixel(19, 2).count(), 0);
         assert_eq!(t.entries(), 5);
+    }
+
+    #[test]
+    fn a_tile_row_yields_the_ids_kept_by_its_chosen_pixels() {
+        let t = by_hand();
+        let ids = |lanes| t.ids_kept_in_tile_row(0, 0, lanes).collect::<Vec<_>>();
+        // Pixel 0 keeps 7 and 9, pixel 1 keeps 9, pixel 2 keeps 7 and 9: 8 only reached it.
+        assert_eq!(ids(0b1), [7, 9]);
+        assert_eq!(ids(0b10), [9]);
+        assert_eq!(ids(0b111), [7, 9]);
+        assert_eq!(ids(0b100), [7, 9]);
+        assert_eq!(ids(0b1000), Vec::<u32>::new());
+        // Against the per-pixel reading on a built top-K, tile by tile and row by row.
+        let lists: Vec<Vec<(u32, f32)>> = (0..40u32 * 3)
+            .map(|p| (0..p % 4).map(|k| ((p * 7 + k * 3) % 11, 0.5)).collect())
+            .collect();
+        let built = TopK::from_lists(40, 3, &lists);
+        for y in 0..3 {
+            for tile_x in 0..built.tiles_x {
+                let lanes = 0b1011_0110_0101_1001;
+                let mut got: Vec<u32> = built.ids_kept_in_tile_row(y, tile_x, lanes).collect();
+                let mut want: Vec<u32> = (0..T)
+                    .filter(|x| lanes & (1 << x) != 0 && tile_x * T + x < 40)
+                    .flat_map(|x| built.pixel(tile_x * T + x, y).map(|e| e.0))
+                    .collect();
+                got.sort_unstable();
+                got.dedup();
+                want.sort_unstable();
+                want.dedup();
+                assert_eq!(got, want, "row {y}, tile {tile_x}");
+            }
+        }
     }
 
     #[test]
