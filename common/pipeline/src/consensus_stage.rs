@@ -350,7 +350,7 @@ impl ConsensusStage {
                         .map_or("-".to_string(), |s| s.to_string())
                 );
             }
-            self.process(&seg, &render)?;
+            self.process(&seg, &render, Answer::First)?;
         }
         Ok(())
     }
@@ -371,7 +371,7 @@ impl ConsensusStage {
         let after = self.consensus.table().clone();
         let config = self.consensus.config().clone();
         self.consensus = LabelConsensus::with_table(config, redo.table_before)?;
-        self.process(seg, render)?;
+        self.process(seg, render, Answer::Again)?;
         if self.consensus.table() != &after {
             tracing::warn!(
                 "keyframe #{seq}: answered again, the table differs from the one saved after it"
@@ -410,7 +410,12 @@ impl ConsensusStage {
         Ok(())
     }
 
-    fn process(&mut self, seg: &OwnedSegments, render: &OwnedRender) -> anyhow::Result<()> {
+    fn process(
+        &mut self,
+        seg: &OwnedSegments,
+        render: &OwnedRender,
+        answer: Answer,
+    ) -> anyhow::Result<()> {
         let start = now_ns();
         let seq = seg.stamp.seq;
         let input = SegmenterInput {
@@ -456,9 +461,20 @@ impl ConsensusStage {
                 out.describe(|label| table.confidence(label))
             );
         }
-        self.telemetry.processed(&seg.stamp, start, now_ns());
+        // A repeat is no keyframe more: the stage's count stays that of keyframes answered.
+        if answer == Answer::First {
+            self.telemetry.processed(&seg.stamp, start, now_ns());
+        }
         Ok(())
     }
+}
+
+/// Whether [`ConsensusStage::process`] answers a keyframe for the first time or repeats the
+/// predecessor's newest answer ([`RedoAnswer`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Answer {
+    First,
+    Again,
 }
 
 /// Keeps `value` until its other half comes, dropping the oldest (logged as stale) past `cap`.
