@@ -184,8 +184,6 @@ fn killed_consensus_resumes_its_label_table() {
     assert!(stderr.contains("restarted consensus"), "{stderr}");
     let log = std::fs::read_to_string(out.join("logs/consensus.log")).expect("log");
     assert!(log.contains("resuming with"), "{log}");
-    // Its predecessor's newest answer may have died with it unread: it is given again.
-    assert!(log.contains("given again"), "{log}");
     let read = |name: &str| -> serde_json::Value {
         serde_json::from_str(&std::fs::read_to_string(out.join(name)).expect(name)).expect(name)
     };
@@ -194,7 +192,9 @@ fn killed_consensus_resumes_its_label_table() {
     // Keyframes segmented while it was down are lost, so a little below the uninterrupted run.
     assert!(miou >= 80.0, "mIoU {miou} after a consensus restart");
     // The restart did not set off a burst of fresh labels for objects the map already knows
-    // (the log line above shows the table was resumed).
+    // (the log line above shows the table was resumed). Killed right after its first answer,
+    // the consensus often took that answer with it unread; until it gave it again after the
+    // restart, the labels came back as New ones (37-40 for 20 objects in 5 of 8 runs).
     let labels = read("labels.json");
     let labels = labels.as_array().expect("array");
     let instances = read("semantics.json")["map"]["instances"]

@@ -322,12 +322,8 @@ impl ConsensusStage {
     /// still waiting for its render is kept (until [`MAX_WAITING_SEGMENTS`] newer ones push it
     /// out); each keyframe is answered once.
     fn run_joined(&mut self) -> anyhow::Result<()> {
-        while let Some(seq) = self
-            .segments
-            .keys()
-            .find(|s| self.renders.contains_key(s))
-            .copied()
-        {
+        // The predecessor's newest answer first: any other answer would make it unrepeatable.
+        while let Some(seq) = self.next_joined() {
             let (Some(seg), Some(render)) = (self.segments.remove(&seq), self.renders.remove(&seq))
             else {
                 break;
@@ -353,6 +349,17 @@ impl ConsensusStage {
             self.process(&seg, &render, Answer::First)?;
         }
         Ok(())
+    }
+
+    /// The keyframe to answer next: the one to repeat ([`RedoAnswer`]) if both its halves are
+    /// here, else the oldest with both.
+    fn next_joined(&self) -> Option<u64> {
+        let joined = |s: &u64| self.segments.contains_key(s) && self.renders.contains_key(s);
+        self.redo
+            .as_ref()
+            .map(|r| r.seq)
+            .filter(joined)
+            .or_else(|| self.segments.keys().find(|s| joined(s)).copied())
     }
 
     /// Gives the predecessor's newest answer again ([`RedoAnswer`]): from the table before it,
