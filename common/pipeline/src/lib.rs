@@ -7,6 +7,7 @@ pub mod cli_values;
 pub mod consensus_stage;
 pub mod dataset_args;
 pub mod deploy;
+pub mod frame_backlog;
 pub mod frame_reader;
 pub mod keyframe_claims;
 pub mod keyframe_journal;

@@ -1,5 +1,6 @@
 //! The tracker stage: frames in, a pose for every frame and keyframes out.
 
+use crate::frame_backlog::{FrameBacklog, BACKLOG_FRAMES};
 use opengs_geometry::{pose_from_tum, pose_to_tum, Intrinsics};
 use opengs_ipc_schema::service::{FRAMES, KEYFRAMES, MAP_TARGET, POSES};
 use opengs_ipc_schema::{
@@ -465,6 +466,7 @@ pub fn run_tracker(ctx: &RunContext, args: &TrackerArgs) -> anyhow::Result<()> {
         stage.early_map = wait_for_map(&map_target)?;
     }
     stage.telemetry.ready();
+    let mut backlog = FrameBacklog::new(BACKLOG_FRAMES);
     let mut last_connect = std::time::Instant::now();
     loop {
         match ws.wait_and_process_once(|_| CallbackProgression::Continue) {
@@ -496,8 +498,35 @@ pub fn run_tracker(ctx: &RunContext, args: &TrackerArgs) -> anyhow::Result<()> {
             }
         }
         frames.clear_wakeups();
-        while let Some(sample) = frames.receive()? {
-            stage.handle(sample.user_header(), sample.payload())?;
+        loop {
+            match backlog.pop() {
+                Some(frame) => {
+                    stage.handle(&frame.header, frame.payload())?;
+                    backlog.recycle(frame);
+                }
+                None => match frames.receive()? {
+                    Some(sample) => stage.handle(sample.user_header(), sample.payload())?,
+                    None => break,
+                },
+            }
+            stage.telemetry.alive();
+            // What arrived while that frame was tracked waits here, not in the service's
+            // 8-frame buffer, which would drop the oldest (crate::frame_backlog).
+            while let Some(sample) = frames.receive()? {
+                if let Some(old) = backlog.push(sample.user_header(), sample.payload()) {
+                    tracing::warn!(
+                        "frame #{} dropped: the tracker is {} frames behind",
+                        old.stamp.seq,
+                        backlog.limit()
+                    );
+                    stage.telemetry.dropped(&old.stamp);
+                }
+            }
+            if let (Some(sample), _) = map_target.receive_newest()? {
+                if !args.ignore_map {
+                    stage.handle_map_target(sample.user_header(), sample.payload());
+                }
+            }
         }
     }
 }

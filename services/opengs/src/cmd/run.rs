@@ -252,8 +252,9 @@ fn print_summary(s: &RunSummary) {
     let skipped = s.frames_published.saturating_sub(s.poses as u64);
     if skipped > 0 {
         println!(
-            "{skipped} published frames got no pose: the tracker fell behind and the oldest \
-             frames were dropped from its queue"
+            "{skipped} published frames got no pose: the tracker was down, or more than {} \
+             frames behind and dropped the oldest (its log names those)",
+            opengs_pipeline::frame_backlog::BACKLOG_FRAMES
         );
     }
     let restarts: Vec<String> = s
