@@ -122,6 +122,15 @@ fn bench_track_times_the_tracker_alone() {
     assert!(stdout.contains("per frame: p50"), "{stdout}");
     assert!(stdout.contains("(40 frames, 1 thread(s))"), "{stdout}");
     assert!(stdout.contains("lost 0 of 40"), "{stdout}");
+    // Every frame after the first is registered, in at least one fine iteration.
+    let registered: usize = stdout
+        .split("fine iterations per registered frame: median ")
+        .nth(1)
+        .and_then(|rest| rest.split(" (").nth(1))
+        .and_then(|rest| rest.split(" frames)").next())
+        .and_then(|v| v.parse().ok())
+        .unwrap_or_else(|| panic!("no iteration figure in: {stdout}"));
+    assert_eq!(registered, 39, "{stdout}");
     let error_cm: f64 = stdout
         .split("position error RMSE ")
         .nth(1)

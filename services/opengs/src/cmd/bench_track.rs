@@ -19,8 +19,8 @@ pub struct BenchTrackArgs {
     /// Threads of the tracker's pool (the tracker stage runs one).
     #[arg(long, default_value_t = 1, value_parser = opengs_pipeline::cli_values::at_least_one)]
     threads: usize,
-    /// Print every frame slower than this (ms), with its status, why the wide search ran
-    /// and why a frame got no pose (0: every frame).
+    /// Print every frame slower than this (ms), with its status, the iterations of its fine
+    /// registration, why the wide search ran and why a frame got no pose (0: every frame).
     #[arg(long, default_value_t = 50.0)]
     slow_ms: f64,
 }
@@ -61,6 +61,9 @@ pub fn run(args: BenchTrackArgs) -> anyhow::Result<()> {
     // ground truth).
     let mut posed: Vec<Option<Option<f64>>> = Vec::with_capacity(n);
     let mut starts_again = 0usize;
+    // Iterations of each registered frame's last (fine) registration: what a frame's time
+    // is made of, between the fine search's cost per iteration and the count.
+    let mut iterations: Vec<usize> = Vec::with_capacity(n);
     for (i, f) in frames.iter().enumerate() {
         // A start (and a start again) is at the truth: the error needs no alignment.
         if let Some(gt) = f.gt {
@@ -80,11 +83,15 @@ pub fn run(args: BenchTrackArgs) -> anyhow::Result<()> {
             wide.saturating_record(us);
         }
         let ms = us as f64 / 1e3;
+        if out.iterations > 0 {
+            iterations.push(out.iterations);
+        }
         if ms > args.slow_ms && out.started_again.is_none() {
             println!(
-                "  frame {i:5} ({:.3} s): {ms:6.1} ms  {:?}{}{}",
+                "  frame {i:5} ({:.3} s): {ms:6.1} ms  {:?}, {} iterations{}{}",
                 f.timestamp,
                 out.status,
+                out.iterations,
                 out.wide_search
                     .as_deref()
                     .map_or(String::new(), |w| format!(", wide search: {w}")),
@@ -133,6 +140,17 @@ pub fn run(args: BenchTrackArgs) -> anyhow::Result<()> {
             wide.len(),
             q(&wide, 0.5),
             wide.max() as f64 / 1e3
+        );
+    }
+    iterations.sort_unstable();
+    if let Some(&max) = iterations.last() {
+        let at = |p: f64| iterations[((iterations.len() - 1) as f64 * p).round() as usize];
+        println!(
+            "fine iterations per registered frame: median {}, p90 {}, max {} ({} frames)",
+            at(0.5),
+            at(0.9),
+            max,
+            iterations.len()
         );
     }
     let rmse = (scored > 0).then(|| (sq_err / scored as f64).sqrt() * 100.0);
