@@ -19,7 +19,7 @@ pub struct RegistrationConfig {
     pub max_iterations: usize,
     /// Stop when the update's rotation is below this (radians, 2e-3) …
     pub rotation_epsilon: f64,
-    /// … and its translation below this (metres, 1e-3; docs/METHOD.md §7 says 5e-4).
+    /// … and its translation below this (metres, 1e-3: the method says 5e-4, docs/METHOD.md §7).
     pub translation_epsilon: f64,
     /// Squared distance (m²) under which a source point counts as overlapping
     /// the target, for the keyframe rule: 1e-3 TUM, 5e-4 Replica.
