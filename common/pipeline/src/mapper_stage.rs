@@ -98,7 +98,7 @@ fn write_map_atomically(map: &GaussianMap, path: &Path) -> anyhow::Result<()> {
 pub struct MapperCounters {
     pub keyframes: usize,
     pub iterations: u64,
-    /// Times the mapper was restarted from a checkpoint.
+    /// Times the mapper was restarted: from its checkpoint, or before the first one from nothing.
     pub restarts: u32,
 }
 
@@ -183,11 +183,33 @@ fn write_checkpoint(
     counters: MapperCounters,
 ) -> anyhow::Result<()> {
     write_map_atomically(map, &run.map_checkpoint())?;
+    write_counters(run, counters)
+}
+
+fn write_counters(run: &RunDir, counters: MapperCounters) -> anyhow::Result<()> {
     let path = run.map_checkpoint_counters();
     let tmp = path.with_extension("json.tmp");
     std::fs::write(&tmp, serde_json::to_string(&counters)?)?;
     std::fs::rename(&tmp, &path)?;
     Ok(())
+}
+
+/// Where a starting mapper begins: the checkpoint's map and counters, or an empty map.
+/// Every mapper writes its counters as it starts (the supervisor clears them before a run),
+/// so one restarted before its first checkpoint still counts its restart; its keyframes
+/// come back from the keyframe service's history.
+fn resume(run: &RunDir) -> anyhow::Result<(Option<GaussianMap>, MapperCounters)> {
+    let checkpoint = run.map_checkpoint();
+    if !checkpoint.exists() && !run.map_checkpoint_counters().exists() {
+        return Ok((None, MapperCounters::default()));
+    }
+    let mut counters = MapperCounters::load(run);
+    counters.restarts += 1;
+    let map = match checkpoint.exists() {
+        true => Some(read_ply_file(&checkpoint)?),
+        false => None,
+    };
+    Ok((map, counters))
 }
 
 struct MapperStage {
@@ -627,22 +649,35 @@ pub fn run_mapper(ctx: &RunContext, out_dir: &Path, args: &MapperArgs) -> anyhow
     };
     let near = config.near;
     let run = RunDir::new(out_dir);
-    let checkpoint = run.map_checkpoint();
-    let (mapper, resumed) = if checkpoint.exists() {
-        let map = read_ply_file(&checkpoint)?;
-        let mut counters = MapperCounters::load(&run);
-        counters.restarts += 1;
-        tracing::warn!(
-            "restarted: resuming from {} ({} Gaussians, {} keyframes mapped before; restart {})",
-            checkpoint.display(),
-            map.len(),
-            counters.keyframes,
-            counters.restarts
-        );
-        (Mapper::with_map(config.clone(), map), counters)
-    } else {
-        (Mapper::new(config.clone()), MapperCounters::default())
+    let (map, resumed) = resume(&run)?;
+    let map_resumed = map.is_some();
+    let mapper = match map {
+        Some(map) => {
+            tracing::warn!(
+                "restarted: resuming from {} ({} Gaussians, {} keyframes mapped before; restart {})",
+                run.map_checkpoint().display(),
+                map.len(),
+                resumed.keyframes,
+                resumed.restarts
+            );
+            Mapper::with_map(config.clone(), map)
+        }
+        None if resumed.restarts > 0 => {
+            tracing::warn!(
+                "restarted before its first checkpoint: an empty map; the keyframes come back \
+                 from the keyframe service's history (restart {})",
+                resumed.restarts
+            );
+            Mapper::new(config.clone())
+        }
+        None => Mapper::new(config.clone()),
     };
+    if let Err(e) = write_counters(&run, resumed) {
+        tracing::warn!(
+            "{}: {e:#}; a restart before the first checkpoint would not be counted",
+            run.map_checkpoint_counters().display()
+        );
+    }
     let mut checkpointer = Checkpointer {
         run: run.clone(),
         every: Duration::from_secs_f64(args.checkpoint_every.max(0.1)),
@@ -674,7 +709,8 @@ pub fn run_mapper(ctx: &RunContext, out_dir: &Path, args: &MapperArgs) -> anyhow
         restored: 0,
         restored_seqs: HashSet::new(),
     };
-    if resumed.restarts > 0 {
+    // Without the map they were mapped into, journalled keyframes come from the history.
+    if map_resumed {
         stage.restore_keyframes(read_journal(&run.mapper_keyframes()));
         tracing::warn!(
             "restarted: {} of {} keyframes back from {}",
@@ -913,10 +949,46 @@ pub fn run_mapper(ctx: &RunContext, out_dir: &Path, args: &MapperArgs) -> anyhow
 #[cfg(test)]
 mod tests {
     use super::*;
+    use opengs_splat::Gaussian;
 
     fn segments(seq: u64) -> SegmentsHeader {
         let stamp = Stamp::new(MessageKind::Segments, seq, 0, 0);
         SegmentsHeader::new(stamp, 64, 48, 0, 0)
+    }
+
+    /// A mapper killed before its first checkpoint (a slow first keyframe) is counted as
+    /// restarted all the same (before: mapper.json said 0 restarts, the supervisor 1).
+    #[test]
+    fn every_start_after_the_first_counts_a_restart_checkpoint_or_not() {
+        let dir = tempfile::tempdir().expect("tmp");
+        let run = RunDir::new(dir.path());
+        let start = |run: &RunDir| {
+            let (map, counters) = resume(run).expect("resume");
+            write_counters(run, counters).expect("counters");
+            (map.map(|m| m.len()), counters.restarts, counters.keyframes)
+        };
+        assert_eq!(start(&run), (None, 0, 0));
+        // Killed before any checkpoint.
+        assert_eq!(start(&run), (None, 1, 0));
+        // This one checkpoints 2 Gaussians, 3 keyframes, then dies.
+        let mut map = GaussianMap::new();
+        for x in [0.0, 1.0] {
+            map.push(Gaussian::from_values(
+                [x, 0.0, 1.0],
+                [1.0, 0.0, 0.0, 0.0],
+                [0.01; 3],
+                0.5,
+                [0.5; 3],
+                0,
+            ));
+        }
+        let counters = MapperCounters {
+            keyframes: 3,
+            iterations: 10,
+            restarts: 1,
+        };
+        write_checkpoint(&run, &map, counters).expect("checkpoint");
+        assert_eq!(start(&run), (Some(2), 2, 3));
     }
 
     #[test]
