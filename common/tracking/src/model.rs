@@ -405,6 +405,12 @@ impl ModelBuilder {
                 while let Ok((applied, result)) = built.recv() {
                     pending.built_with(applied);
                     if applied >= *cleared_at {
+                        // A builder quicker than this call went idle after its hand-over
+                        // and was lifted above, then left waiting in the normal policy:
+                        // with nothing left to build it goes back, as after any hand-over.
+                        if pending.applied == pending.submitted && idle_time::may_leave_idle() {
+                            idle_time::set_idle(tid.load(Ordering::SeqCst), true);
+                        }
                         return vec![result];
                     }
                 }
