@@ -56,8 +56,9 @@ fn faulted_run_with(
         if stage == "mapper" {
             // A mapper faulted before its first checkpoint starts again from an empty map
             // (its keyframes from the service history, their labels lost where no later view
-            // sees them; killed in its first second by hand: mIoU 84.5 against 89.3). On a
-            // slow machine pose 30 can come first; these tests measure a checkpointed one.
+            // sees them; killed in its first second by hand: mIoU 84.5, a clean run of the build
+            // before 89.3). On a slow machine pose 30 can come first; these tests measure a
+            // checkpointed one.
             while !out.join("map_checkpoint.ply").exists() {
                 assert!(Instant::now() < deadline, "{tag}: no mapper checkpoint");
                 std::thread::sleep(Duration::from_millis(20));
