@@ -233,3 +233,83 @@ fn final_optimisation_runs_after_the_data_and_ctrl_c_keeps_its_map() {
     assert!(done > 0 && done < 1_000_000, "{stats}");
     assert!(out.join("map.ply").exists(), "map.ply kept");
 }
+
+/// The newest keyframe seqs in `dir/index.txt` of a run's keyframe journal.
+fn journalled_keyframes(dir: &std::path::Path) -> Vec<u64> {
+    std::fs::read_to_string(dir.join("index.txt"))
+        .unwrap_or_default()
+        .lines()
+        .filter_map(|l| l.split_whitespace().next()?.parse().ok())
+        .collect()
+}
+
+/// A mapper killed while a consensus result it applied is newer than its checkpoint (a
+/// file in `mapper_consensus/`) applies that result again after its restart, and maps every
+/// journalled keyframe its checkpoint lacked. Before: the consensus answers a keyframe once,
+/// so those labels were lost, and journalled keyframes newer than the checkpoint came back as
+/// training targets without Gaussians (killed at pose 30 by hand: mIoU 76.7 against 96.7
+/// fault-free, with the checkpoint holding 2 of 3 journalled keyframes).
+#[test]
+fn a_killed_mapper_gets_back_what_its_checkpoint_lacks() {
+    let _serial = serial();
+    let dir = tempfile::tempdir().expect("tmp");
+    let out = dir.path().join("run");
+    let run_id = format!("t{}-relabel", std::process::id());
+    let run = opengs_run(&run_id, &out)
+        .args([
+            "--frames",
+            "120",
+            "--finish-steps",
+            "0",
+            "--segmenter",
+            "prior",
+        ])
+        .spawn()
+        .expect("run starts");
+    let mut run = Guard(run);
+    let deadline = Instant::now() + Duration::from_secs(120);
+    let results = out.join("mapper_consensus");
+    let pending = loop {
+        assert!(Instant::now() < deadline, "no consensus result journalled");
+        let seqs: Vec<u64> = std::fs::read_dir(&results)
+            .into_iter()
+            .flatten()
+            .flatten()
+            .filter_map(|e| e.file_name().to_str()?.strip_suffix(".bin")?.parse().ok())
+            .collect();
+        if let (false, Some(pid)) = (seqs.is_empty(), stage_pid(&run_id, "mapper")) {
+            // SAFETY: signalling a process this test's run started.
+            assert_eq!(unsafe { libc::kill(pid, libc::SIGKILL) }, 0);
+            break seqs;
+        }
+        std::thread::sleep(Duration::from_millis(5));
+    };
+    let running = std::mem::replace(&mut run.0, Command::new("true").spawn().expect("true"));
+    let output = running.wait_with_output().expect("run ends");
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(output.status.success(), "{stderr}");
+    let log = std::fs::read_to_string(out.join("logs/mapper.log")).expect("mapper log");
+    let restart = log
+        .lines()
+        .find(|l| l.contains("journalled consensus results the map lacked applied again"))
+        .unwrap_or_else(|| panic!("no restart summary: {log}"));
+    eprintln!("killed with results {pending:?} journalled; {restart}");
+    let held: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(out.join("map_checkpoint.json")).expect("map_checkpoint.json"),
+    )
+    .expect("json");
+    let set = |key: &str| -> Vec<u64> {
+        held[key]
+            .as_array()
+            .map(|a| a.iter().filter_map(|v| v.as_u64()).collect())
+            .unwrap_or_default()
+    };
+    let (mapped, labelled) = (set("mapped"), set("labelled"));
+    for seq in &pending {
+        assert!(labelled.contains(seq), "consensus #{seq} lost: {held}");
+    }
+    for seq in journalled_keyframes(&out.join("mapper_keyframes")) {
+        assert!(mapped.contains(&seq), "keyframe #{seq} not mapped: {held}");
+    }
+    assert_eq!(mapped.len() as u64, held["keyframes"].as_u64().unwrap_or(0));
+}

@@ -73,6 +73,12 @@ impl RunDir {
         self.file("mapper_keyframes")
     }
 
+    /// The consensus results the mapper applied since its last checkpoint (the pipeline's
+    /// `consensus_journal`), so a restarted mapper labels again what the checkpoint lacks.
+    pub fn mapper_consensus(&self) -> PathBuf {
+        self.file("mapper_consensus")
+    }
+
     /// Keyframe sequence numbers, one per line, appended as the mapper adds them (the
     /// held-out frames of the semantic scoring).
     pub fn keyframes(&self) -> PathBuf {

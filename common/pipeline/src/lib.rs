@@ -4,6 +4,7 @@
 //! display. Stage binaries in `services/` call into this crate.
 
 pub mod cli_values;
+pub mod consensus_journal;
 pub mod consensus_stage;
 pub mod dataset_args;
 pub mod deploy;

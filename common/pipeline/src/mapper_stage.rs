@@ -2,7 +2,7 @@
 //! continuously; the trackable Gaussians out to the tracker; the map
 //! checkpointed to the run directory and written as `map.ply` at the end.
 
-use std::collections::{BTreeMap, HashSet, VecDeque};
+use std::collections::{BTreeMap, BTreeSet, HashMap, HashSet, VecDeque};
 use std::io::Write;
 use std::ops::ControlFlow;
 use std::path::{Path, PathBuf};
@@ -29,6 +29,7 @@ use opengs_splat::{read_ply_file, write_ply_file, Camera, GaussianMap};
 
 use opengs_runtime::finish_requested_flag;
 
+use crate::consensus_journal::{read_consensus_journal, ConsensusJournal, JournalConsensus};
 use crate::keyframe_journal::{read_journal, JournalKeyframe, KeyframeJournal};
 
 /// The mapper's flags that `opengs run` sets ([`crate::run_options::StageFlags`]); one struct for
@@ -93,13 +94,20 @@ fn write_map_atomically(map: &GaussianMap, path: &Path) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// What the mapper has done, kept with its checkpoint so a restarted mapper counts on.
-#[derive(Debug, Clone, Copy, Default, serde::Serialize, serde::Deserialize, PartialEq)]
+/// What the mapper has done, kept with its checkpoint so a restarted mapper counts on and
+/// knows what its checkpoint lacks.
+#[derive(Debug, Clone, Default, serde::Serialize, serde::Deserialize, PartialEq)]
 pub struct MapperCounters {
     pub keyframes: usize,
     pub iterations: u64,
     /// Times the mapper was restarted: from its checkpoint, or before the first one from nothing.
     pub restarts: u32,
+    /// Keyframes whose Gaussians the checkpoint's map holds, by seq.
+    #[serde(default)]
+    pub mapped: BTreeSet<u64>,
+    /// Keyframes whose consensus result the checkpoint's map holds, by seq.
+    #[serde(default)]
+    pub labelled: BTreeSet<u64>,
 }
 
 impl MapperCounters {
@@ -114,14 +122,6 @@ impl MapperCounters {
             Err(_) => Self::default(),
         }
     }
-
-    fn plus(self, keyframes: usize, iterations: u64) -> Self {
-        Self {
-            keyframes: self.keyframes + keyframes,
-            iterations: self.iterations + iterations,
-            restarts: self.restarts,
-        }
-    }
 }
 
 /// Checkpoints off the optimisation path: the map is copied (a few MB) and written, with its
@@ -131,8 +131,10 @@ struct Checkpointer {
     every: Duration,
     last: Option<Instant>,
     /// (keyframes, consensus results) the last checkpoint holds.
-    holds: (usize, u64),
+    holds: (usize, usize),
     writing: Option<std::thread::JoinHandle<anyhow::Result<()>>>,
+    /// Forgets the consensus results each checkpoint holds once it is written.
+    consensus_journal: Option<ConsensusJournal>,
 }
 
 /// A new keyframe or label change is checkpointed at most this long after the last one.
@@ -143,8 +145,14 @@ impl Checkpointer {
     /// of a keyframe or consensus the last checkpoint lacks (what a restart could not get
     /// back: the keyframe service's history holds only the newest few, and labels lost
     /// would come back as new ones); otherwise every `every` for the optimisation's progress.
-    fn maybe(&mut self, map: &GaussianMap, counters: MapperCounters, consensus: u64) {
-        let news = (counters.keyframes, consensus) != self.holds;
+    /// `holds`: the (keyframes, consensus results) the map holds now.
+    fn maybe(
+        &mut self,
+        map: &GaussianMap,
+        holds: (usize, usize),
+        counters: impl FnOnce() -> MapperCounters,
+    ) {
+        let news = holds != self.holds;
         let due = match self.last {
             None => true,
             Some(t) => t.elapsed() >= self.every || (news && t.elapsed() >= CHECKPOINT_NEWS),
@@ -156,11 +164,16 @@ impl Checkpointer {
             return;
         }
         self.join();
-        let (map, run) = (map.clone(), self.run.clone());
+        let (map, run, counters) = (map.clone(), self.run.clone(), counters());
+        let journal = self.consensus_journal.clone();
         self.last = Some(Instant::now());
-        self.holds = (counters.keyframes, consensus);
+        self.holds = holds;
         self.writing = Some(std::thread::spawn(move || {
-            write_checkpoint(&run, &map, counters)
+            write_checkpoint(&run, &map, &counters)?;
+            if let Some(journal) = journal {
+                journal.forget(&counters.labelled);
+            }
+            Ok(())
         }));
     }
 
@@ -180,16 +193,16 @@ impl Checkpointer {
 fn write_checkpoint(
     run: &RunDir,
     map: &GaussianMap,
-    counters: MapperCounters,
+    counters: &MapperCounters,
 ) -> anyhow::Result<()> {
     write_map_atomically(map, &run.map_checkpoint())?;
     write_counters(run, counters)
 }
 
-fn write_counters(run: &RunDir, counters: MapperCounters) -> anyhow::Result<()> {
+fn write_counters(run: &RunDir, counters: &MapperCounters) -> anyhow::Result<()> {
     let path = run.map_checkpoint_counters();
     let tmp = path.with_extension("json.tmp");
-    std::fs::write(&tmp, serde_json::to_string(&counters)?)?;
+    std::fs::write(&tmp, serde_json::to_string(counters)?)?;
     std::fs::rename(&tmp, &path)?;
     Ok(())
 }
@@ -209,6 +222,11 @@ fn resume(run: &RunDir) -> anyhow::Result<(Option<GaussianMap>, MapperCounters)>
         true => Some(read_ply_file(&checkpoint)?),
         false => None,
     };
+    if map.is_none() {
+        // What no map holds.
+        counters.mapped.clear();
+        counters.labelled.clear();
+    }
     Ok((map, counters))
 }
 
@@ -231,21 +249,23 @@ struct MapperStage {
     map_version: u32,
     /// Counters of the checkpoint this process resumed from (zero on a first start).
     resumed: MapperCounters,
-    /// Consensus results applied by this process.
-    consensus_applied: u64,
-    /// Seqs of the newest results applied: a consensus killed between sending a result and
-    /// recording it answers that keyframe again after its restart.
-    applied_seqs: VecDeque<u64>,
+    /// Keyframes whose Gaussians the map holds (a restarted mapper: its checkpoint's too).
+    /// The keyframe service's history hands a restarted mapper the newest keyframes again,
+    /// and only those the map lacks are mapped.
+    mapped: BTreeSet<u64>,
+    /// Keyframes this process optimises against (a checkpoint's keyframe the journal lacks
+    /// comes back from the history as a target only).
+    targets: HashSet<u64>,
+    /// Keyframes whose consensus result the map holds: a consensus killed between sending a
+    /// result and recording it answers that keyframe again after its restart.
+    labelled: BTreeSet<u64>,
+    /// The results applied since the last checkpoint, for a restart ([`ConsensusJournal`]).
+    consensus_journal: Option<ConsensusJournal>,
     out_dir: PathBuf,
     /// Full-resolution keyframes for the final optimisation (only when it is asked for).
     kept: Option<KeptKeyframes>,
     /// Every keyframe on disk, for a restart (none when the journal cannot be written).
     journal: Option<KeyframeJournal>,
-    /// Keyframes this process got back from the journal (counted in `resumed` already).
-    restored: usize,
-    /// Their seqs: the keyframe service's history hands a restarted mapper the newest
-    /// keyframes again, and only those it never got are new.
-    restored_seqs: HashSet<u64>,
 }
 
 /// Segmented keyframes waiting for their render. Replicas of the segmenter finish keyframes
@@ -258,25 +278,21 @@ struct SegmentsQueue {
     /// Seqs rendered already: service history (a restarted segmenter or mapper) and a swap's
     /// two processes can hand the same segmentation over twice.
     rendered: VecDeque<u64>,
-    /// A restarted mapper: what waits at the first render is the service's history, mostly
-    /// answered before the restart (the consensus skips those, and each would hold the next
-    /// render for its 5 s timeout), so only the newest of it is rendered.
-    history: bool,
 }
 
 /// Segmentations waiting for a render (a keyframe a second at most, on a slow segmenter).
 const MAX_WAITING_SEGMENTS: usize = 8;
 
 impl SegmentsQueue {
-    fn after_restart() -> Self {
-        Self {
-            history: true,
-            ..Self::default()
-        }
-    }
-
-    fn push(&mut self, h: SegmentsHeader) {
+    /// Queues a segmentation for its render, unless its consensus is in the map already
+    /// (`labelled`: service history hands a restarted mapper segmentations its checkpoint
+    /// or journal had the labels of) or it was rendered already.
+    fn push(&mut self, h: SegmentsHeader, labelled: &BTreeSet<u64>) {
         let seq = h.stamp.seq;
+        if labelled.contains(&seq) {
+            tracing::debug!("segments #{seq}: its consensus is in the map already");
+            return;
+        }
         if self.rendered.contains(&seq) {
             tracing::debug!("segments #{seq}: rendered for the consensus already");
             return;
@@ -294,14 +310,6 @@ impl SegmentsQueue {
 
     fn take_newest(&mut self) -> Option<SegmentsHeader> {
         let (seq, h) = self.waiting.pop_last()?;
-        if std::mem::take(&mut self.history) && !self.waiting.is_empty() {
-            tracing::info!(
-                "restarted: segmentations {:?} (service history, before the restart) dropped; \
-                 #{seq}, the newest, rendered",
-                self.waiting.keys().collect::<Vec<_>>()
-            );
-            self.waiting.clear();
-        }
         self.rendered.push_back(seq);
         if self.rendered.len() > 64 {
             self.rendered.pop_front();
@@ -354,7 +362,11 @@ impl MapperStage {
             self.mapper.config(),
         );
         self.keep_keyframe(h.stamp.seq, pose, k, view.rgb, view.depth, h.depth_scale);
-        self.record_keyframe(h.stamp.seq);
+        self.targets.insert(h.stamp.seq);
+        let in_map = self.mapped.contains(&h.stamp.seq);
+        if !in_map {
+            self.record_keyframe(h.stamp.seq);
+        }
         if let Some(journal) = &self.journal {
             journal.append(JournalKeyframe {
                 seq: h.stamp.seq,
@@ -364,6 +376,15 @@ impl MapperStage {
                 rgb: view.rgb.to_vec(),
                 depth: view.depth.to_vec(),
             });
+        }
+        if in_map {
+            // The checkpoint's map holds its Gaussians; the journal had missed it.
+            self.mapper.restore_keyframe(stored);
+            tracing::info!(
+                "keyframe #{} (service history): in the map already, a target again",
+                h.stamp.seq
+            );
+            return Ok(());
         }
         let input = DensifyInput {
             points: view.points,
@@ -376,6 +397,7 @@ impl MapperStage {
         };
         let mapper = &mut self.mapper;
         let added = pool.install(|| mapper.add_keyframe(&input, stored));
+        self.mapped.insert(h.stamp.seq);
         tracing::info!(
             "keyframe #{}: +{added} Gaussians ({} in the map, {} keyframes)",
             h.stamp.seq,
@@ -396,8 +418,8 @@ impl MapperStage {
         let mut newest = None;
         while let Some(sample) = keyframes.receive()? {
             let seq = sample.user_header().stamp.seq;
-            if self.restored_seqs.contains(&seq) {
-                tracing::debug!("keyframe #{seq} (service history): back from the journal already");
+            if self.targets.contains(&seq) {
+                tracing::debug!("keyframe #{seq} (service history): held already");
                 continue;
             }
             self.handle_keyframe(pool, sample.user_header(), sample.payload())?;
@@ -488,6 +510,7 @@ impl MapperStage {
         let label_map = &r.label_map;
         self.renders
             .send(header, |hd, buf| hd.encode(label_map, &labels, buf))?;
+        tracing::debug!("segments #{seq}: rendered for the consensus");
         self.outstanding = Some((seq, Instant::now()));
         Ok(true)
     }
@@ -501,16 +524,33 @@ impl MapperStage {
         if self.outstanding.is_some_and(|(s, _)| s == seq) {
             self.outstanding = None;
         }
-        if self.applied_seqs.contains(&seq) {
+        if self.labelled.contains(&seq) {
             tracing::info!("consensus #{seq}: applied already, the repeat skipped");
             return;
         }
+        if self.apply_consensus(h, payload, "") {
+            if let Some(journal) = &self.consensus_journal {
+                if let Err(e) = journal.append(h, payload) {
+                    tracing::warn!(
+                        "consensus #{seq}: not journalled ({e}); a restart before the next \
+                         checkpoint would lose its labels"
+                    );
+                }
+            }
+            self.telemetry.processed(&h.stamp, start, now_ns());
+        }
+    }
+
+    /// Decodes and applies a consensus result whose render is pending; true when applied.
+    /// `how` qualifies the log line.
+    fn apply_consensus(&mut self, h: &ConsensusHeader, payload: &[u8], how: &str) -> bool {
+        let seq = h.stamp.seq;
         let view = match h.decode(payload) {
             Ok(v) => v,
             Err(e) => {
                 tracing::error!("consensus #{seq} rejected: {e}");
                 self.telemetry.dropped(&h.stamp);
-                return;
+                return false;
             }
         };
         let res = &view.result;
@@ -551,7 +591,8 @@ impl MapperStage {
         match self.mapper.apply_consensus(&update) {
             Ok(done) => {
                 tracing::info!(
-                    "consensus #{seq}: {} relabelled, {} labelled, {} counter Gaussians pruned",
+                    "consensus #{seq}{how}: {} relabelled, {} labelled, {} counter Gaussians \
+                     pruned",
                     done.relabelled,
                     done.labelled,
                     done.pruned
@@ -563,32 +604,50 @@ impl MapperStage {
                         done.kept_off_host
                     );
                 }
-                self.consensus_applied += 1;
-                self.applied_seqs.push_back(seq);
-                if self.applied_seqs.len() > 64 {
-                    self.applied_seqs.pop_front();
-                }
-                self.telemetry.processed(&h.stamp, start, now_ns());
+                self.labelled.insert(seq);
+                true
             }
             Err(e) => {
                 tracing::warn!("{e}");
                 self.telemetry.dropped(&h.stamp);
+                false
             }
         }
     }
 
     /// Counters of the whole run: those of the checkpoint resumed from, plus this process's.
     fn counters(&self) -> MapperCounters {
-        self.resumed.plus(
-            self.mapper.keyframes() - self.restored,
-            self.mapper.iterations(),
-        )
+        MapperCounters {
+            keyframes: self.mapped.len(),
+            iterations: self.resumed.iterations + self.mapper.iterations(),
+            restarts: self.resumed.restarts,
+            mapped: self.mapped.clone(),
+            labelled: self.labelled.clone(),
+        }
     }
 
-    /// A restarted mapper takes its journalled keyframes back: training targets, cameras
-    /// for the consensus renders, and the final optimisation's keyframes.
-    fn restore_keyframes(&mut self, journal: Vec<JournalKeyframe>) {
+    /// What the map holds, in the checkpointer's terms.
+    fn holds(&self) -> (usize, usize) {
+        (self.mapped.len(), self.labelled.len())
+    }
+
+    /// A restarted mapper takes its journalled keyframes back: training targets, cameras for
+    /// the consensus renders, and the final optimisation's keyframes. `in_map`: those its
+    /// checkpoint's map holds (as targets only); otherwise those it lacks (after its
+    /// checkpoint, which the keyframe service's history no longer held), mapped again from
+    /// their depth where the map leaves it open (the tracker's points died with the
+    /// message). Returns how many.
+    fn take_journal(
+        &mut self,
+        pool: &rayon::ThreadPool,
+        journal: &[JournalKeyframe],
+        in_map: bool,
+    ) -> usize {
+        let mut taken = 0;
         for kf in journal {
+            if self.mapped.contains(&kf.seq) != in_map || self.targets.contains(&kf.seq) {
+                continue;
+            }
             let stored = StoredKeyframe::new(
                 kf.seq,
                 kf.pose,
@@ -598,7 +657,26 @@ impl MapperStage {
                 kf.depth_scale,
                 self.mapper.config(),
             );
-            self.mapper.restore_keyframe(stored);
+            if in_map {
+                self.mapper.restore_keyframe(stored);
+            } else {
+                let input = DensifyInput {
+                    points: &[],
+                    covariances: &[],
+                    pose: kf.pose,
+                    intrinsics: kf.intrinsics,
+                    rgb: &kf.rgb,
+                    depth: &kf.depth,
+                    depth_scale: kf.depth_scale,
+                };
+                let mapper = &mut self.mapper;
+                let added = pool.install(|| mapper.add_keyframe(&input, stored));
+                tracing::info!(
+                    "keyframe #{}: mapped again from the journal, +{added} Gaussians",
+                    kf.seq
+                );
+                self.mapped.insert(kf.seq);
+            }
             self.keep_keyframe(
                 kf.seq,
                 kf.pose,
@@ -607,9 +685,37 @@ impl MapperStage {
                 &kf.depth,
                 kf.depth_scale,
             );
-            self.restored += 1;
-            self.restored_seqs.insert(kf.seq);
+            self.targets.insert(kf.seq);
+            taken += 1;
         }
+        taken
+    }
+
+    /// A restarted mapper applies again the journalled consensus results its map lacks:
+    /// each through a render at its keyframe now, so the Gaussians mapped again get the
+    /// labels the consensus gave (the consensus answers a keyframe once). Returns how many.
+    fn apply_again(
+        &mut self,
+        pool: &rayon::ThreadPool,
+        results: &[JournalConsensus],
+        cameras: &HashMap<u64, Camera>,
+    ) -> usize {
+        let mut applied = 0;
+        for r in results {
+            let seq = r.seq();
+            if self.labelled.contains(&seq) {
+                continue;
+            }
+            let kept = self.cameras.iter().find(|(s, _)| *s == seq).map(|c| c.1);
+            let Some(camera) = kept.or_else(|| cameras.get(&seq).copied()) else {
+                tracing::warn!("consensus #{seq} (journal): its keyframe is not here; not applied");
+                continue;
+            };
+            let (mapper, k) = (&mut self.mapper, self.top_k);
+            pool.install(|| mapper.render_for_consensus(seq, &camera, k));
+            applied += usize::from(self.apply_consensus(&r.header, r.payload(), " (journal)"));
+        }
+        applied
     }
 
     /// A keyframe's camera for the consensus renders (the newest [`KEPT_CAMERAS`]) and, when
@@ -672,27 +778,35 @@ pub fn run_mapper(ctx: &RunContext, out_dir: &Path, args: &MapperArgs) -> anyhow
         }
         None => Mapper::new(config.clone()),
     };
-    if let Err(e) = write_counters(&run, resumed) {
+    if let Err(e) = write_counters(&run, &resumed) {
         tracing::warn!(
             "{}: {e:#}; a restart before the first checkpoint would not be counted",
             run.map_checkpoint_counters().display()
         );
     }
+    let consensus_journal = match ConsensusJournal::start(&run.mapper_consensus()) {
+        Ok(j) => Some(j),
+        Err(e) => {
+            tracing::warn!(
+                "{}: {e}; a restarted mapper would lose the labels its checkpoint lacks",
+                run.mapper_consensus().display()
+            );
+            None
+        }
+    };
     let mut checkpointer = Checkpointer {
         run: run.clone(),
         every: Duration::from_secs_f64(args.checkpoint_every.max(0.1)),
         last: None,
-        holds: (0, 0),
+        holds: (resumed.mapped.len(), resumed.labelled.len()),
         writing: None,
+        consensus_journal: consensus_journal.clone(),
     };
     let mut stage = MapperStage {
         mapper,
         map_target: Outlet::new(ctx, &node, &MAP_TARGET, 1 << 20)?,
         renders: Outlet::new(ctx, &node, &RENDERS, 640 * 480 * 4 + (1 << 16))?,
-        waiting_segments: match resumed.restarts {
-            0 => SegmentsQueue::default(),
-            _ => SegmentsQueue::after_restart(),
-        },
+        waiting_segments: SegmentsQueue::default(),
         outstanding: None,
         newest_keyframe: None,
         segments_seen: false,
@@ -700,22 +814,28 @@ pub fn run_mapper(ctx: &RunContext, out_dir: &Path, args: &MapperArgs) -> anyhow
         top_k: args.top_k.max(1),
         telemetry: TelemetrySink::new(ctx, &node, "mapper")?,
         map_version: 0,
-        resumed,
-        consensus_applied: 0,
-        applied_seqs: VecDeque::new(),
+        mapped: resumed.mapped.clone(),
+        targets: HashSet::new(),
+        labelled: resumed.labelled.clone(),
+        resumed: resumed.clone(),
+        consensus_journal,
         out_dir: out_dir.to_path_buf(),
         kept: (args.run.finish_steps > 0).then(|| KeptKeyframes::new(args.finish_keyframes)),
         journal: None,
-        restored: 0,
-        restored_seqs: HashSet::new(),
     };
-    // Without the map they were mapped into, journalled keyframes come from the history.
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(args.threads.max(1))
+        .build()?;
+    // Read before this process journals anything.
+    let journalled = match resumed.restarts {
+        0 => Vec::new(),
+        _ => read_journal(&run.mapper_keyframes()),
+    };
     if map_resumed {
-        stage.restore_keyframes(read_journal(&run.mapper_keyframes()));
+        let restored = stage.take_journal(&pool, &journalled, true);
         tracing::warn!(
-            "restarted: {} of {} keyframes back from {}",
-            stage.restored,
-            resumed.keyframes,
+            "restarted: {restored} of the {} keyframes its map holds back from {}",
+            resumed.mapped.len(),
             run.mapper_keyframes().display()
         );
     }
@@ -729,9 +849,6 @@ pub fn run_mapper(ctx: &RunContext, out_dir: &Path, args: &MapperArgs) -> anyhow
             None
         }
     };
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(args.threads.max(1))
-        .build()?;
     let ws = waitset()?;
     let _guard = ws
         .attach_notification(keyframes.listener())
@@ -758,6 +875,20 @@ pub fn run_mapper(ctx: &RunContext, out_dir: &Path, args: &MapperArgs) -> anyhow
         tracing::warn!(
             "restarted: {} keyframes it had missed taken from the keyframe service's history",
             stage.mapper.keyframes() - missed
+        );
+        // The keyframes after the checkpoint that the history no longer holds, then the
+        // labels the consensus gave all of those.
+        let again = stage.take_journal(&pool, &journalled, false);
+        let cameras: HashMap<u64, Camera> = journalled
+            .iter()
+            .map(|kf| (kf.seq, Camera::from_pose(kf.intrinsics, &kf.pose, near)))
+            .collect();
+        let results = read_consensus_journal(&run.mapper_consensus());
+        let relabelled = stage.apply_again(&pool, &results, &cameras);
+        tracing::warn!(
+            "restarted: {again} keyframes the map lacked mapped again from the journal; \
+             {relabelled} of {} journalled consensus results the map lacked applied again",
+            results.len()
         );
     }
     stage.telemetry.ready();
@@ -802,12 +933,20 @@ pub fn run_mapper(ctx: &RunContext, out_dir: &Path, args: &MapperArgs) -> anyhow
         }
         while let Some(sample) = segments.receive()? {
             stage.segments_seen = true;
-            stage.waiting_segments.push(*sample.user_header());
+            stage
+                .waiting_segments
+                .push(*sample.user_header(), &stage.labelled);
         }
-        if stage
+        if let Some((seq, _)) = stage
             .outstanding
-            .is_none_or(|(_, since)| since.elapsed() > CONSENSUS_TIMEOUT)
+            .take_if(|(_, since)| since.elapsed() > CONSENSUS_TIMEOUT)
         {
+            tracing::info!(
+                "consensus #{seq}: not back after {} s; the next render goes on without it",
+                CONSENSUS_TIMEOUT.as_secs()
+            );
+        }
+        if stage.outstanding.is_none() {
             if let Some(h) = stage.waiting_segments.take_newest() {
                 if !stage.handle_segments(&pool, &h)? {
                     stage.waiting_segments.put_back(h);
@@ -834,11 +973,7 @@ pub fn run_mapper(ctx: &RunContext, out_dir: &Path, args: &MapperArgs) -> anyhow
         }
         let mapper = &mut stage.mapper;
         pool.install(|| mapper.step());
-        checkpointer.maybe(
-            stage.mapper.map(),
-            stage.counters(),
-            stage.consensus_applied,
-        );
+        checkpointer.maybe(stage.mapper.map(), stage.holds(), || stage.counters());
     }
     checkpointer.join();
     if let Some(journal) = stage.journal.as_mut() {
@@ -849,7 +984,7 @@ pub fn run_mapper(ctx: &RunContext, out_dir: &Path, args: &MapperArgs) -> anyhow
     let finishing = ended_by_finish && stage.kept.is_some();
     if finishing && !stage.mapper.map().is_empty() {
         // The online map is safe before the final optimisation starts.
-        if let Err(e) = write_checkpoint(&run, stage.mapper.map(), counters) {
+        if let Err(e) = write_checkpoint(&run, stage.mapper.map(), &counters) {
             tracing::error!("checkpoint failed: {e:#}");
         }
     }
@@ -925,7 +1060,7 @@ pub fn run_mapper(ctx: &RunContext, out_dir: &Path, args: &MapperArgs) -> anyhow
     let seconds = started.elapsed().as_secs_f64();
     if !map.is_empty() {
         write_map_atomically(&map, &run.map())?;
-        write_checkpoint(&run, &map, counters)?;
+        write_checkpoint(&run, &map, &counters)?;
     }
     let stats = serde_json::json!({
         // The whole run's, across restarts; the rate is this process's.
@@ -964,13 +1099,19 @@ mod tests {
         let run = RunDir::new(dir.path());
         let start = |run: &RunDir| {
             let (map, counters) = resume(run).expect("resume");
-            write_counters(run, counters).expect("counters");
-            (map.map(|m| m.len()), counters.restarts, counters.keyframes)
+            write_counters(run, &counters).expect("counters");
+            let held = (counters.mapped.len(), counters.labelled.len());
+            (
+                map.map(|m| m.len()),
+                counters.restarts,
+                counters.keyframes,
+                held,
+            )
         };
-        assert_eq!(start(&run), (None, 0, 0));
+        assert_eq!(start(&run), (None, 0, 0, (0, 0)));
         // Killed before any checkpoint.
-        assert_eq!(start(&run), (None, 1, 0));
-        // This one checkpoints 2 Gaussians, 3 keyframes, then dies.
+        assert_eq!(start(&run), (None, 1, 0, (0, 0)));
+        // This one checkpoints 2 Gaussians, 3 keyframes (2 of them labelled), then dies.
         let mut map = GaussianMap::new();
         for x in [0.0, 1.0] {
             map.push(Gaussian::from_values(
@@ -986,9 +1127,11 @@ mod tests {
             keyframes: 3,
             iterations: 10,
             restarts: 1,
+            mapped: BTreeSet::from([0, 10, 20]),
+            labelled: BTreeSet::from([0, 10]),
         };
-        write_checkpoint(&run, &map, counters).expect("checkpoint");
-        assert_eq!(start(&run), (Some(2), 2, 3));
+        write_checkpoint(&run, &map, &counters).expect("checkpoint");
+        assert_eq!(start(&run), (Some(2), 2, 3, (3, 2)));
     }
 
     #[test]
@@ -996,11 +1139,11 @@ mod tests {
         let mut q = SegmentsQueue::default();
         // Replicas finish 12, then 10, then 11.
         for seq in [12, 10, 11] {
-            q.push(segments(seq));
+            q.push(segments(seq), &BTreeSet::new());
         }
         let first = q.take_newest().map(|h| h.stamp.seq);
         // 12 again (a restarted segmenter's service history): rendered already, ignored.
-        q.push(segments(12));
+        q.push(segments(12), &BTreeSet::new());
         let rest: Vec<u64> = std::iter::from_fn(|| q.take_newest().map(|h| h.stamp.seq)).collect();
         assert_eq!((first, rest), (Some(12), vec![11, 10]));
         assert!(q.is_empty());
@@ -1009,7 +1152,7 @@ mod tests {
     #[test]
     fn a_segmentation_ahead_of_its_keyframe_waits_and_is_rendered_later() {
         let mut q = SegmentsQueue::default();
-        q.push(segments(30));
+        q.push(segments(30), &BTreeSet::new());
         let early = q.take_newest();
         assert!(q.was_rendered(30));
         // Its keyframe has not come: back in the queue, no longer counted as rendered.
@@ -1017,33 +1160,32 @@ mod tests {
             q.put_back(h);
         }
         assert!(!q.was_rendered(30));
-        q.push(segments(20));
+        q.push(segments(20), &BTreeSet::new());
         let order: Vec<u64> = std::iter::from_fn(|| q.take_newest().map(|h| h.stamp.seq)).collect();
         assert_eq!(order, [30, 20]);
         assert!(q.was_rendered(30) && q.was_rendered(20));
     }
 
+    /// Service history hands a restarted mapper the newest segmentations: those whose
+    /// consensus its map holds are skipped, every other one is rendered (before: only the
+    /// newest, and keyframes segmented but not yet rendered before the kill never got a
+    /// consensus: beside a busy loop, keyframe #0 of the built-in room, its largest part).
     #[test]
-    fn a_restarted_mapper_renders_only_the_newest_of_the_history() {
-        let mut q = SegmentsQueue::after_restart();
-        for seq in [40, 50, 60, 70] {
-            q.push(segments(seq));
+    fn a_restarted_mapper_renders_the_history_its_map_lacks_the_consensus_of() {
+        let mut q = SegmentsQueue::default();
+        let labelled = BTreeSet::from([10, 40]);
+        for seq in [0, 10, 20, 30, 40] {
+            q.push(segments(seq), &labelled);
         }
-        assert_eq!(q.take_newest().map(|h| h.stamp.seq), Some(70));
-        assert!(q.is_empty(), "40, 50, 60 dropped");
-        // From then on, out of order as usual.
-        for seq in [90, 80] {
-            q.push(segments(seq));
-        }
-        let rest: Vec<u64> = std::iter::from_fn(|| q.take_newest().map(|h| h.stamp.seq)).collect();
-        assert_eq!(rest, [90, 80]);
+        let order: Vec<u64> = std::iter::from_fn(|| q.take_newest().map(|h| h.stamp.seq)).collect();
+        assert_eq!(order, [30, 20, 0]);
     }
 
     #[test]
     fn past_its_bound_the_oldest_waiting_segmentation_is_dropped() {
         let mut q = SegmentsQueue::default();
         for seq in 100..100 + MAX_WAITING_SEGMENTS as u64 + 2 {
-            q.push(segments(seq));
+            q.push(segments(seq), &BTreeSet::new());
         }
         let all: Vec<u64> = std::iter::from_fn(|| q.take_newest().map(|h| h.stamp.seq)).collect();
         let expected: Vec<u64> = (102..100 + MAX_WAITING_SEGMENTS as u64 + 2).rev().collect();

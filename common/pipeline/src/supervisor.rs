@@ -101,6 +101,7 @@ impl Supervisor {
             run_dir.label_table(),
             run_dir.consensus_progress(),
             run_dir.mapper_keyframes(),
+            run_dir.mapper_consensus(),
             run_dir.segmenter_claims(),
         ] {
             let removed = match stale.is_dir() {
