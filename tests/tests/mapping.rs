@@ -234,7 +234,7 @@ fn final_optimisation_runs_after_the_data_and_ctrl_c_keeps_its_map() {
     assert!(out.join("map.ply").exists(), "map.ply kept");
 }
 
-/// The newest keyframe seqs in `dir/index.txt` of a run's keyframe journal.
+/// Every keyframe seq in `dir/index.txt`, the index of a run's keyframe journal.
 fn journalled_keyframes(dir: &std::path::Path) -> Vec<u64> {
     std::fs::read_to_string(dir.join("index.txt"))
         .unwrap_or_default()
