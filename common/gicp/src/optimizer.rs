@@ -74,8 +74,8 @@ impl Normal {
 
 /// Registers `source` to `target` starting from `initial` (source → target).
 /// Runs on the current rayon pool: use `pool.install` to bound threads.
-/// Plain Gauss-Newton steps: Anderson acceleration (AA-ICP, memory 2, 3 and 5, with and
-/// without a safeguard) took 645–779 fine iterations against 691 (the worst frame 16–26
+/// Plain Gauss-Newton steps: Anderson acceleration (AA-ICP: memory 5 with a safeguard,
+/// memory 2 and 3 without) took 645–779 fine iterations against 691 (the worst frame 16–26
 /// against 12) on 100 noisy frames of scene 2 along fr2_desk: correspondences flipping under
 /// noise make the map from one step to the next rough.
 pub fn register(

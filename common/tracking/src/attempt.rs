@@ -66,7 +66,7 @@ pub(crate) fn register_verified(
     // calls the wide search again. The fast attempt registers every point from the start: a
     // first pass on a source thinned to 3–6 cm voxels cut its full-size iterations (median 7 →
     // 2–4) but not its time (scene 2 along fr2_desk with noise: p50 29.7–35.6 → 25.8–34.1 ms,
-    // within the machine's spread, and 6 → 9 wide searches).
+    // within the machine's spread, and 6–8 → 8–9 wide searches).
     let (schedule, iterations) = match kind {
         Attempt::Fast => (CoarseToFine::fine_only(), c.fast_iterations),
         Attempt::Turned => (c.turned.clone(), c.fast_iterations),
