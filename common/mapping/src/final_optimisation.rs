@@ -144,7 +144,7 @@ pub fn optimise_final(
     let stats = refine(map, &kept.frames, k, &config, progress)?;
     tracing::info!(
         "final optimisation: {} steps on {} keyframes in {:.1} s, loss {:.4} → {:.4}, \
-         {} → {} Gaussians ({} split, {} pruned)",
+         {} → {} Gaussians ({} split, {} pruned); {}",
         stats.iterations,
         stats.keyframes,
         t0.elapsed().as_secs_f64(),
@@ -153,7 +153,8 @@ pub fn optimise_final(
         stats.gaussians_before,
         stats.gaussians_after,
         stats.split,
-        stats.pruned
+        stats.pruned,
+        stats.step_ms
     );
     Ok(Some(stats))
 }

@@ -31,7 +31,7 @@ pub use fragment::{
 };
 pub use keyframe::StoredKeyframe;
 pub use mapper::{Mapper, TrackableGaussians};
-pub use refine::{refine, target_frame, RefineConfig, RefineError, RefineStats};
+pub use refine::{refine, target_frame, RefineConfig, RefineError, RefineStats, RefineStepMs};
 pub use scene_extent::scene_extent;
 pub use semantic::{
     ConsensusApplied, ConsensusApplyError, ConsensusUpdate, KeyframeRender, LabelVisibility,

@@ -102,6 +102,29 @@ pub struct RefineStats {
     pub first_loss: f32,
     pub last_loss: f32,
     pub seconds: f64,
+    /// Mean wall-clock ms per step of its stages (what a faster step would have to cut).
+    pub step_ms: RefineStepMs,
+}
+
+/// Mean wall-clock ms per refinement step: the training step's stages, and the rest (the
+/// target built from the keyframe, splitting and pruning).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize)]
+pub struct RefineStepMs {
+    pub render: f64,
+    pub loss: f64,
+    pub backward: f64,
+    pub adam: f64,
+    pub other: f64,
+}
+
+impl std::fmt::Display for RefineStepMs {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "render {:.1}, loss {:.1}, backward {:.1}, adam {:.1}, other {:.1} ms/step",
+            self.render, self.loss, self.backward, self.adam, self.other
+        )
+    }
 }
 
 /// Optimises `map` for `config.iters` steps on `keyframes` (frame, camera-to-world pose;
@@ -162,6 +185,7 @@ pub fn refine(
     let mut stats = GradientStats::default();
     stats.reset(map.len());
     let mut split = 0;
+    let mut stage_sum = RefineStepMs::default();
     // Steps between rounds: the first half holds `split_rounds` of them, at least
     // `MIN_STEPS_BETWEEN_SPLITS` apart so the children of one round settle before the next.
     let split_every = (config.iters / 2)
@@ -185,6 +209,10 @@ pub fn refine(
             full
         };
         let step = train_step(map, &mut adam, &cameras[k], &target, &train, &mut ws);
+        stage_sum.render += step.wall.render;
+        stage_sum.loss += step.wall.loss;
+        stage_sum.backward += step.wall.backward;
+        stage_sum.adam += step.wall.adam;
         losses.push(step.loss.total);
         stats.add(&ws.grads);
         let densify = config.split_rounds > 0 && (i + 1) % split_every == 0 && i < config.iters / 2;
@@ -212,6 +240,16 @@ pub fn refine(
         }
     }
     prune(map, Some(&mut adam), &prune_config);
+    let seconds = t0.elapsed().as_secs_f64();
+    let steps = losses.len().max(1) as f64;
+    let staged = stage_sum.render + stage_sum.loss + stage_sum.backward + stage_sum.adam;
+    let step_ms = RefineStepMs {
+        render: stage_sum.render / steps,
+        loss: stage_sum.loss / steps,
+        backward: stage_sum.backward / steps,
+        adam: stage_sum.adam / steps,
+        other: ((seconds * 1e3 - staged) / steps).max(0.0),
+    };
     let tenth = (losses.len() / 10).max(1);
     let mean = |s: &[f32]| {
         if s.is_empty() {
@@ -230,7 +268,8 @@ pub fn refine(
         split,
         first_loss: mean(&losses[..tenth.min(losses.len())]),
         last_loss: mean(&losses[losses.len().saturating_sub(tenth)..]),
-        seconds: t0.elapsed().as_secs_f64(),
+        seconds,
+        step_ms,
     })
 }
 

@@ -45,6 +45,18 @@ fn refinement_raises_psnr_of_a_perturbed_map() {
     );
     assert_eq!(calls, 100);
     assert!(stats.last_loss < stats.first_loss, "{stats:?}");
+    // Every stage took time, and the stages with the rest add up to the whole run.
+    let ms = stats.step_ms;
+    assert!(
+        ms.render > 0.0 && ms.loss > 0.0 && ms.backward > 0.0 && ms.adam > 0.0,
+        "{ms:?}"
+    );
+    let total = ms.render + ms.loss + ms.backward + ms.adam + ms.other;
+    assert!(
+        (total * 100.0 - stats.seconds * 1e3).abs() < 1.0,
+        "{ms:?} × 100 vs {} s",
+        stats.seconds
+    );
     // Measured 17.48 → 21.39 dB, SSIM 0.416 → 0.746.
     assert!(
         after.psnr_db > before.psnr_db + 2.5,
