@@ -173,6 +173,38 @@ fn final_optimisation_runs_after_the_data_and_ctrl_c_keeps_its_map() {
         map.len() as u64,
         stats["gaussians"].as_u64().expect("count")
     );
+    // After the final optimisation every pose was aligned to the map; the tracker's poses
+    // are kept, frame for frame, and metrics.json says what the alignment did.
+    let stamps = |name: &str| -> Vec<String> {
+        std::fs::read_to_string(out.join(name))
+            .expect(name)
+            .lines()
+            .filter(|l| !l.starts_with('#'))
+            .filter_map(|l| l.split_whitespace().next().map(str::to_string))
+            .collect()
+    };
+    let (refined, tracker) = (stamps("trajectory.txt"), stamps("trajectory_tracker.txt"));
+    assert_eq!(refined, tracker);
+    let metrics: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(out.join("metrics.json")).expect("metrics.json"),
+    )
+    .expect("json");
+    let aligned = &metrics["pose_refinement"];
+    assert_eq!(
+        aligned["poses"].as_u64(),
+        Some(refined.len() as u64),
+        "{metrics}"
+    );
+    assert!(
+        aligned["accepted"].as_u64().is_some_and(|n| n > 0),
+        "{metrics}"
+    );
+    assert!(metrics["ate_rmse_cm_tracker"].is_number(), "{metrics}");
+    assert!(
+        String::from_utf8_lossy(&output.stdout).contains("poses aligned to the final map"),
+        "{}",
+        String::from_utf8_lossy(&output.stdout)
+    );
 
     // Ctrl-C during a final optimisation far too long to finish: the map so far is written.
     let out = dir.path().join("interrupted");
@@ -186,6 +218,8 @@ fn final_optimisation_runs_after_the_data_and_ctrl_c_keeps_its_map() {
     );
     let status = interrupt(&mut run.0, Duration::from_secs(30));
     assert_eq!(status.code(), Some(130), "interrupted, outputs kept");
+    // An interrupted run keeps the tracker's poses as they are.
+    assert!(!out.join("trajectory_tracker.txt").exists());
     let stats = mapper_stats(&out);
     let done = stats["final_optimisation"]["iterations"]
         .as_u64()

@@ -52,9 +52,14 @@ impl RunDir {
         self.file("map_refined.ply")
     }
 
-    /// Verified camera poses (TUM format).
+    /// Verified camera poses (TUM format); after a final optimisation, aligned to the map.
     pub fn trajectory(&self) -> PathBuf {
         self.file("trajectory.txt")
+    }
+
+    /// The tracker's poses, kept when trajectory.txt was refined against the final map.
+    pub fn trajectory_tracker(&self) -> PathBuf {
+        self.file("trajectory_tracker.txt")
     }
 
     /// Ground-truth poses of the frames in `trajectory.txt`, when the dataset has them.

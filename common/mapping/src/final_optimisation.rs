@@ -123,7 +123,7 @@ pub fn fill_holes(map: &mut GaussianMap, kept: &KeptKeyframes, config: &MapperCo
 /// it is then. Returns `None` when there is nothing to optimise.
 pub fn optimise_final(
     map: &mut GaussianMap,
-    kept: &KeptKeyframes,
+    kept: &mut KeptKeyframes,
     steps: usize,
     near: f32,
     progress: impl FnMut(usize, f32) -> ControlFlow<()>,
@@ -141,10 +141,10 @@ pub fn optimise_final(
         ..RefineConfig::default()
     };
     let t0 = Instant::now();
-    let stats = refine(map, &kept.frames, k, &config, progress)?;
+    let stats = refine(map, &mut kept.frames, k, &config, progress)?;
     tracing::info!(
         "final optimisation: {} steps on {} keyframes in {:.1} s, loss {:.4} → {:.4}, \
-         {} → {} Gaussians ({} split, {} pruned); {}",
+         {} → {} Gaussians ({} split, {} pruned); {}; {}",
         stats.iterations,
         stats.keyframes,
         t0.elapsed().as_secs_f64(),
@@ -154,7 +154,8 @@ pub fn optimise_final(
         stats.gaussians_after,
         stats.split,
         stats.pruned,
-        stats.step_ms
+        stats.step_ms,
+        stats.poses
     );
     Ok(Some(stats))
 }

@@ -18,10 +18,12 @@ mod final_optimisation;
 mod fragment;
 mod keyframe;
 mod mapper;
+mod pose_refinement;
 mod refine;
 mod scene_extent;
 mod semantic;
 mod splitting;
+mod target_frame;
 
 pub use config::MapperConfig;
 pub use densify::{gaussians_for_holes, gaussians_from_points, DensifyInput, HoleFilling};
@@ -31,10 +33,14 @@ pub use fragment::{
 };
 pub use keyframe::StoredKeyframe;
 pub use mapper::{Mapper, TrackableGaussians};
-pub use refine::{refine, target_frame, RefineConfig, RefineError, RefineStats, RefineStepMs};
+pub use pose_refinement::{
+    refine_pose, PoseRefinement, PoseRefinementConfig, PoseRefinementWorkspace,
+};
+pub use refine::{refine, PoseRoundStats, RefineConfig, RefineError, RefineStats, RefineStepMs};
 pub use scene_extent::scene_extent;
 pub use semantic::{
     ConsensusApplied, ConsensusApplyError, ConsensusUpdate, KeyframeRender, LabelVisibility,
     PendingRenders, SemanticLoop, MAX_PENDING_RENDERS,
 };
 pub use splitting::{split_largest_gradients, GradientStats};
+pub use target_frame::target_frame;

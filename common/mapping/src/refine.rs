@@ -9,15 +9,19 @@ use opengs_datasets::RgbdFrame;
 use opengs_geometry::{Intrinsics, Pose};
 use opengs_splat::{
     downscale_camera2, prune, train_step, Adam, AdamConfig, Camera, GaussianMap, LossWeights,
-    PruneConfig, TargetFrame, TrainConfig, TrainWorkspace, DEFAULT_NEAR,
+    PruneConfig, TrainConfig, TrainWorkspace, DEFAULT_NEAR,
 };
 use rand::seq::SliceRandom;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use serde::Serialize;
 
+use crate::pose_refinement::{
+    refine_pose, PoseRefinement, PoseRefinementConfig, PoseRefinementWorkspace,
+};
 use crate::scene_extent::scene_extent;
 use crate::splitting::{split_largest_gradients, GradientStats};
+use crate::target_frame::target_frame;
 
 /// Why a refinement could not start.
 #[derive(Debug, thiserror::Error)]
@@ -67,6 +71,15 @@ pub struct RefineConfig {
     /// Smallest scene extent (m) used for the learning rate and size pruning, so a nearly
     /// static camera does not make every Gaussian "too large".
     pub min_scene_extent: f32,
+    /// Times the keyframe poses are aligned photometrically to the map being optimised
+    /// ([`refine_pose`]), evenly spread over the steps (0: never). One, halfway, when the
+    /// map is already sharp: scene 1's loop with noise, 600 steps from the online map,
+    /// held-out frames aligned afterwards: 0 rounds 26.07 dB, 1 round 26.98 (ATE of the
+    /// scored poses 0.27 cm), 2 rounds 27.05 (0.34 cm); aligned before the first step, to
+    /// the blurred online map, 26.70 with the ATE worse (0.54 cm).
+    pub pose_rounds: usize,
+    /// How each keyframe pose is aligned.
+    pub poses: PoseRefinementConfig,
 }
 
 impl Default for RefineConfig {
@@ -83,6 +96,8 @@ impl Default for RefineConfig {
             near: DEFAULT_NEAR,
             loss: LossWeights::default(),
             min_scene_extent: 1.0,
+            pose_rounds: 1,
+            poses: PoseRefinementConfig::default(),
         }
     }
 }
@@ -104,6 +119,48 @@ pub struct RefineStats {
     pub seconds: f64,
     /// Mean wall-clock ms per step of its stages (what a faster step would have to cut).
     pub step_ms: RefineStepMs,
+    /// What the keyframe pose refinements did.
+    pub poses: PoseRoundStats,
+}
+
+/// Keyframe pose refinements over a whole refinement.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize)]
+pub struct PoseRoundStats {
+    /// Poses refined (keyframes × rounds), and of those accepted.
+    pub refined: usize,
+    pub accepted: usize,
+    /// Mean accepted correction (mm, degrees).
+    pub mean_translation_mm: f64,
+    pub mean_rotation_deg: f64,
+    pub seconds: f64,
+}
+
+impl std::fmt::Display for PoseRoundStats {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "keyframe poses aligned to the map: {} of {} accepted, mean correction {:.2} mm \
+             {:.3}°, {:.1} s",
+            self.accepted,
+            self.refined,
+            self.mean_translation_mm,
+            self.mean_rotation_deg,
+            self.seconds
+        )
+    }
+}
+
+impl PoseRoundStats {
+    fn add(&mut self, r: &PoseRefinement) {
+        self.refined += 1;
+        if r.accepted {
+            let n = self.accepted as f64;
+            self.mean_translation_mm =
+                (self.mean_translation_mm * n + r.translation * 1e3) / (n + 1.0);
+            self.mean_rotation_deg = (self.mean_rotation_deg * n + r.rotation_deg) / (n + 1.0);
+            self.accepted += 1;
+        }
+    }
 }
 
 /// Mean wall-clock ms per refinement step: the training step's stages, and the rest (the
@@ -133,7 +190,7 @@ impl std::fmt::Display for RefineStepMs {
 /// is pruned and kept as it is, e.g. on Ctrl-C).
 pub fn refine(
     map: &mut GaussianMap,
-    keyframes: &[(RgbdFrame, Pose)],
+    keyframes: &mut [(RgbdFrame, Pose)],
     intrinsics: Intrinsics,
     config: &RefineConfig,
     mut progress: impl FnMut(usize, f32) -> ControlFlow<()>,
@@ -141,7 +198,7 @@ pub fn refine(
     if keyframes.is_empty() {
         return Err(RefineError::NoKeyframes);
     }
-    for (frame, _) in keyframes {
+    for (frame, _) in keyframes.iter() {
         frame
             .check_buffers(&intrinsics)
             .map_err(|message| RefineError::Frame {
@@ -155,17 +212,18 @@ pub fn refine(
         &map.means,
         config.min_scene_extent,
     );
-    let cameras: Vec<Camera> = keyframes
-        .iter()
-        .map(|(_, pose)| {
-            let cam = Camera::from_pose(intrinsics, pose, config.near);
-            if config.downscale {
-                downscale_camera2(&cam)
-            } else {
-                cam
-            }
-        })
-        .collect();
+    let camera_of = |pose: &Pose| {
+        let cam = Camera::from_pose(intrinsics, pose, config.near);
+        if config.downscale {
+            downscale_camera2(&cam)
+        } else {
+            cam
+        }
+    };
+    let mut cameras: Vec<Camera> = keyframes.iter().map(|(_, p)| camera_of(p)).collect();
+    let pose_steps = pose_round_steps(config.iters, config.pose_rounds);
+    let mut pose_ws = PoseRefinementWorkspace::default();
+    let mut poses = PoseRoundStats::default();
     let prune_config = PruneConfig {
         scene_extent: extent,
         ..PruneConfig::default()
@@ -235,6 +293,16 @@ pub fn refine(
         if densify || pruning {
             stats.reset(map.len());
         }
+        if pose_steps.contains(&(i + 1)) {
+            let t = Instant::now();
+            for ((frame, pose), camera) in keyframes.iter_mut().zip(&mut cameras) {
+                let r = refine_pose(map, intrinsics, frame, pose, &config.poses, &mut pose_ws);
+                poses.add(&r);
+                *pose = r.pose;
+                *camera = camera_of(pose);
+            }
+            poses.seconds += t.elapsed().as_secs_f64();
+        }
         if progress(i + 1, step.loss.total).is_break() {
             break;
         }
@@ -270,15 +338,15 @@ pub fn refine(
         last_loss: mean(&losses[losses.len().saturating_sub(tenth)..]),
         seconds,
         step_ms,
+        poses,
     })
 }
 
-/// `frame` as a training target at full resolution (its buffers checked first).
-pub fn target_frame(frame: &RgbdFrame) -> TargetFrame {
-    let rgb: Vec<[u8; 3]> = frame
-        .rgb
-        .chunks_exact(3)
-        .map(|p| [p[0], p[1], p[2]])
-        .collect();
-    TargetFrame::from_rgb8(frame.width, frame.height, &rgb, &frame.depth_metres())
+/// The steps after which the keyframe poses are refined: `rounds` of them, evenly spread
+/// (for 600 steps and 2 rounds: after 200 and 400), never after the last step.
+fn pose_round_steps(iters: usize, rounds: usize) -> Vec<usize> {
+    (1..=rounds)
+        .map(|r| r * iters / (rounds + 1))
+        .filter(|&s| s > 0 && s < iters)
+        .collect()
 }

@@ -32,6 +32,7 @@ pub mod status;
 pub mod supervisor;
 pub mod swap;
 pub mod tracker_stage;
+pub mod trajectory_refinement;
 pub mod viewer_args;
 pub mod watchdog;
 

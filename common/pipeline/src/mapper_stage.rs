@@ -997,7 +997,7 @@ pub fn run_mapper(ctx: &RunContext, out_dir: &Path, args: &MapperArgs) -> anyhow
     let mut map = mapper.into_map();
     let mut finish_stats = None;
     let mut holes_filled = None;
-    if let Some(kept) = kept.filter(|_| finishing) {
+    if let Some(mut kept) = kept.filter(|_| finishing) {
         let steps = args.run.finish_steps;
         tracing::info!(
             "end of data: final optimisation, {steps} full-resolution steps on {} keyframes",
@@ -1008,7 +1008,7 @@ pub fn run_mapper(ctx: &RunContext, out_dir: &Path, args: &MapperArgs) -> anyhow
         finish_stats = std::thread::scope(|scope| {
             // The optimisation runs on the pool; this thread keeps the IPC side (progress
             // telemetry, termination requests), whose handles cannot leave it.
-            let (map, kept, pool, stop) = (&mut map, &kept, &pool, &stop);
+            let (map, kept, pool, stop) = (&mut map, &mut kept, &pool, &stop);
             let worker = scope.spawn(move || {
                 pool.install(|| {
                     optimise_final(map, kept, steps, near, |done, loss| {

@@ -15,6 +15,7 @@ use crate::recorder::Recorder;
 use crate::run_options::RunOptions;
 use crate::scoring::Scores;
 use crate::supervisor::{Ending, Supervisor};
+use crate::trajectory_refinement::{self, TrajectoryRefinement};
 
 /// What a finished run produced.
 pub struct RunSummary {
@@ -36,6 +37,8 @@ pub struct RunSummary {
     /// Files of this run still in /dev/shm or the iceoryx2 root after shutdown (should be none).
     pub leftover_files: Vec<PathBuf>,
     pub recorder: Recorder,
+    /// The end-of-run alignment of the poses to the final map, when it ran.
+    pub pose_refinement: Option<TrajectoryRefinement>,
     pub scores: Scores,
 }
 
@@ -67,6 +70,23 @@ pub fn run(opts: RunOptions) -> anyhow::Result<RunSummary> {
     }
     // Outputs are written on every path: nothing produced is lost.
     crate::run_outputs::write(&run_dir, &opts, &mut supervised)?;
+    // Only after the data ended: a stopped or failed run is scored as it is.
+    let ended = matches!(supervised.ending, Ok(Ending::EndOfData));
+    let pose_refinement = match trajectory_refinement::skip_reason(&run_dir, &opts, !ended) {
+        Some(why) => {
+            if opts.pose_refinement && ended {
+                eprintln!("poses not refined against the map: {why}");
+            }
+            None
+        }
+        None => {
+            eprintln!("refining every pose against the final map ...");
+            trajectory_refinement::refine_trajectory(&run_dir, &opts, opts.progress)
+                .map_err(|e| eprintln!("pose refinement: {e:#}; the tracker's poses are kept"))
+                .ok()
+                .flatten()
+        }
+    };
     let scores = crate::scoring::score(&run_dir, &opts, !supervised.recorder.is_empty());
     let summary = RunSummary {
         out_dir: opts.out_dir.clone(),
@@ -87,6 +107,7 @@ pub fn run(opts: RunOptions) -> anyhow::Result<RunSummary> {
         interrupted: matches!(supervised.ending, Ok(Ending::Interrupted)),
         leftover_files: supervised.leftover_files,
         recorder: supervised.recorder,
+        pose_refinement,
         scores,
     };
     match supervised.ending? {

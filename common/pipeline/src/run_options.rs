@@ -25,6 +25,9 @@ pub struct RunOptions {
     pub progress: bool,
     /// Score rendered views against every Nth frame at the end (0 = skip).
     pub quality_every: usize,
+    /// After a final optimisation, align every pose to the final map before scoring
+    /// ([`crate::trajectory_refinement`]).
+    pub pose_refinement: bool,
     /// At the end of the data, let stages with a `finish_timeout_s` do their final work
     /// (else every stage is stopped at once).
     pub finish_after_data: bool,

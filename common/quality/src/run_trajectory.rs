@@ -20,6 +20,10 @@ pub struct RunMetrics {
     pub ate_rmse_cm: Option<f64>,
     pub ate_mean_cm: Option<f64>,
     pub ate_max_cm: Option<f64>,
+    /// ATE RMSE of the tracker's own poses when trajectory.txt was refined against the map
+    /// (`trajectory_tracker.txt`).
+    #[serde(default)]
+    pub ate_rmse_cm_tracker: Option<f64>,
 }
 
 /// The `ate_*` keys of the metrics.json at `path` that hold a number.
@@ -59,6 +63,7 @@ pub fn evaluate_run_trajectory(run_dir: &Path) -> anyhow::Result<RunMetrics> {
         ate_rmse_cm: None,
         ate_mean_cm: None,
         ate_max_cm: None,
+        ate_rmse_cm_tracker: None,
     };
     let has_gt = gt_path.exists();
     if has_gt {
@@ -67,6 +72,12 @@ pub fn evaluate_run_trajectory(run_dir: &Path) -> anyhow::Result<RunMetrics> {
         metrics.ate_rmse_cm = Some(ate.rmse * 100.0);
         metrics.ate_mean_cm = Some(ate.mean * 100.0);
         metrics.ate_max_cm = Some(ate.max * 100.0);
+        let tracker = run.trajectory_tracker();
+        if tracker.exists() {
+            let poses = read_tum_trajectory(&tracker)?;
+            let ate = absolute_trajectory_error(&poses, &gt, MAX_DT)?;
+            metrics.ate_rmse_cm_tracker = Some(ate.rmse * 100.0);
+        }
     }
     // Merge: other producers (render quality, refine) keep their keys.
     let serde_json::Value::Object(mut entries) = serde_json::to_value(&metrics)? else {

@@ -84,6 +84,7 @@ pub fn run(args: NodeArgs) -> anyhow::Result<()> {
         stage_flags: StageFlags::default(),
         progress: false,
         quality_every: 0,
+        pose_refinement: false,
         finish_after_data: false,
         live: false,
         host: Some(args.host.clone()),

@@ -61,6 +61,10 @@ pub struct RefineArgs {
     /// Refuse a map with NaN or infinite values instead of leaving those Gaussians out.
     #[arg(long)]
     pub strict: bool,
+    /// Times the keyframe poses are aligned photometrically to the map being refined,
+    /// evenly spread over the steps (0: never; the mapper's final optimisation does 1).
+    #[arg(long, default_value_t = 1)]
+    pub pose_rounds: usize,
 }
 
 pub fn run(args: RefineArgs) -> anyhow::Result<()> {
@@ -111,7 +115,7 @@ pub fn run(args: RefineArgs) -> anyhow::Result<()> {
     .context("evaluating the map before refinement")?;
     print_quality("before", &before);
 
-    let (keyframes, unmatched) =
+    let (mut keyframes, unmatched) =
         load_posed_frames(source.as_mut(), &trajectory, every).context("loading keyframes")?;
     if unmatched > 0 {
         eprintln!("{unmatched} trajectory poses match no dataset frame within 1 ms; skipped");
@@ -127,6 +131,7 @@ pub fn run(args: RefineArgs) -> anyhow::Result<()> {
         downscale: args.half_resolution,
         seed: args.seed,
         min_scene_extent: args.min_scene_extent,
+        pose_rounds: args.pose_rounds,
         ..RefineConfig::default()
     };
     let bar = progress_bar(args.iters)?;
@@ -135,7 +140,7 @@ pub fn run(args: RefineArgs) -> anyhow::Result<()> {
     for signal in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
         signal_hook::flag::register(signal, Arc::clone(&stop))?;
     }
-    let stats = refine(&mut map, &keyframes, intrinsics, &config, |i, loss| {
+    let stats = refine(&mut map, &mut keyframes, intrinsics, &config, |i, loss| {
         bar.set_position(i as u64);
         if i % 10 == 0 {
             bar.set_message(format!("loss {loss:.4}"));
@@ -164,6 +169,9 @@ pub fn run(args: RefineArgs) -> anyhow::Result<()> {
         stats.gaussians_after
     );
     println!("  {}", stats.step_ms);
+    if stats.poses.refined > 0 {
+        println!("  {}", stats.poses);
+    }
     drop(keyframes);
 
     let after = evaluate_dataset_quality(

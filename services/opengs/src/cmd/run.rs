@@ -63,6 +63,11 @@ pub struct RunArgs {
     /// Score rendered views (PSNR/SSIM) against every Nth frame at the end; 0 skips it.
     #[arg(long, default_value_t = 20)]
     pub quality_every: usize,
+    /// Keep the tracker's poses. By default, after the final optimisation every pose is
+    /// aligned photometrically to the final map (about 0.1 s per frame on 2 cores, reading
+    /// the dataset again) and the tracker's poses are kept in trajectory_tracker.txt.
+    #[arg(long)]
+    pub no_pose_refinement: bool,
     /// No progress bar or progress lines.
     #[arg(long)]
     pub quiet: bool,
@@ -214,6 +219,7 @@ pub fn execute(args: &RunArgs) -> anyhow::Result<RunSummary> {
         stage_flags,
         progress: !args.quiet,
         quality_every: args.quality_every,
+        pose_refinement: !args.no_pose_refinement,
         finish_after_data: finish_after_data && !args.live,
         live: args.live,
         host: None,
@@ -266,12 +272,23 @@ fn print_summary(s: &RunSummary) {
     if !restarts.is_empty() {
         println!("restarts: {}", restarts.join(", "));
     }
+    if let Some(r) = &s.pose_refinement {
+        println!(
+            "poses aligned to the final map: {} of {} accepted, mean correction {:.2} mm {:.3}°, \
+             {:.1} s (the tracker's poses are in trajectory_tracker.txt)",
+            r.accepted, r.poses, r.mean_translation_mm, r.mean_rotation_deg, r.seconds
+        );
+    }
     if let Some(m) = &s.scores.metrics {
         if let (Some(rmse), Some(mean)) = (m.ate_rmse_cm, m.ate_mean_cm) {
-            println!(
+            print!(
                 "ATE (Umeyama, no scale): RMSE {rmse:.3} cm, mean {mean:.3} cm over {} frames",
                 m.frames
             );
+            match m.ate_rmse_cm_tracker {
+                Some(t) => println!(" (the tracker's poses: RMSE {t:.3} cm)"),
+                None => println!(),
+            }
         }
     }
     if let Some(q) = &s.scores.quality {
