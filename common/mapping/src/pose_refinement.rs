@@ -117,50 +117,32 @@ pub fn refine_pose(
     // Full resolution: at half (2×2 means against a half-size render) the same frames of
     // scene 1's loop scored 23.89 dB where the tracker's poses gave 24.57.
     let observed = target_frame(frame);
-    let mut result: Option<PoseRefinement> = None;
-    for _ in 0..config.rounds.max(1) {
-        let from = result.map_or(*pose, |r| r.pose);
-        let round = refine_once(map, intrinsics, &observed, &from, config, ws);
-        let small = round.translation < 1e-4 && round.rotation_deg < 0.005;
-        result = Some(match result {
-            None => round,
-            Some(prev) if round.accepted => {
-                let e = pose.inverse() * round.pose;
-                PoseRefinement {
-                    translation: e.translation.vector.norm(),
-                    rotation_deg: e.rotation.angle().to_degrees(),
-                    rms_before: prev.rms_before,
-                    iterations: prev.iterations + round.iterations,
-                    ..round
-                }
-            }
-            Some(prev) => prev,
-        });
-        if !round.accepted || small {
+    let mut result = refine_once(map, intrinsics, &observed, pose, config, ws);
+    let mut last = result;
+    for _ in 1..config.rounds.max(1) {
+        let settled = last.translation < 1e-4 && last.rotation_deg < 0.005;
+        if !last.accepted || settled {
             break;
         }
+        last = refine_once(map, intrinsics, &observed, &result.pose, config, ws);
+        if last.accepted {
+            let e = pose.inverse() * last.pose;
+            result = PoseRefinement {
+                translation: e.translation.vector.norm(),
+                rotation_deg: e.rotation.angle().to_degrees(),
+                rms_before: result.rms_before,
+                iterations: result.iterations + last.iterations,
+                ..last
+            };
+        }
     }
-    let mut r = result.unwrap_or_else(|| unreachable_refusal(pose));
     // The combined correction must stay within the limits, whatever each round did.
-    if r.translation > config.max_translation || r.rotation_deg > config.max_rotation_deg {
-        r.accepted = false;
-        r.pose = *pose;
+    if result.translation > config.max_translation || result.rotation_deg > config.max_rotation_deg
+    {
+        result.accepted = false;
+        result.pose = *pose;
     }
-    r
-}
-
-/// Never produced (at least one round runs); keeps the loop free of a panic path.
-fn unreachable_refusal(pose: &Pose) -> PoseRefinement {
-    PoseRefinement {
-        pose: *pose,
-        translation: 0.0,
-        rotation_deg: 0.0,
-        pixels: 0,
-        rms_before: f32::NAN,
-        rms_after: f32::NAN,
-        iterations: 0,
-        accepted: false,
-    }
+    result
 }
 
 /// One render at `pose` and Gauss–Newton against it.
