@@ -108,7 +108,8 @@ pub fn refine_trajectory(
                 Ok(Some(frame)) => batch.push((i, frame)),
                 Ok(None) => report.unmatched += 1,
                 Err(e) => {
-                    result = Err(anyhow::Error::new(e).context("reading a frame"));
+                    let at = format!("reading the frame at t = {:.6} s", p.timestamp);
+                    result = Err(anyhow::Error::new(e).context(at));
                     break;
                 }
             }
