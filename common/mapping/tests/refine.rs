@@ -213,10 +213,15 @@ fn keyframe_poses_are_aligned_to_the_map_halfway() {
         ..RefineConfig::default()
     };
     assert_eq!(config.pose_rounds, 1, "the final optimisation's default");
-    let stats = refine(&mut map, &mut keyframes, k, &config, |_, _| {
+    let mut heard = Vec::new();
+    let stats = refine(&mut map, &mut keyframes, k, &config, |i, _| {
+        heard.push(i);
         ControlFlow::Continue(())
     })
     .expect("refines");
+    // The caller hears from the round after each of its keyframes, not only after the step:
+    // a round over 61 keyframes took 10 s, and the supervisor's watchdog killed the mapper.
+    assert_eq!(heard, [1, 2, 2, 2, 2, 3, 4]);
     let after = error(&keyframes);
     println!(
         "keyframe pose error {:.2} → {:.2} mm; {}",
@@ -228,4 +233,73 @@ fn keyframe_poses_are_aligned_to_the_map_halfway() {
     assert!(stats.poses.accepted >= 2, "{:?}", stats.poses);
     // Measured 10.77 → 1.94 mm.
     assert!(after < 0.25 * before, "{before} → {after}");
+}
+
+/// A stop asked for during a pose round ends the refinement there, after the keyframe being
+/// aligned (a round over hundreds of keyframes would keep a Ctrl-C waiting for a minute).
+#[test]
+fn a_stop_during_a_pose_round_ends_it_after_that_keyframe() {
+    let mut room = small_room();
+    let k = room.intrinsics();
+    let mut keyframes = posed(&mut room, &[0, 3, 6]);
+    let mut map = backproject(&keyframes[0].0, &keyframes[0].1, &k);
+    let config = RefineConfig {
+        iters: 4,
+        downscale: false,
+        split_rounds: 0,
+        pose_rounds: 1,
+        ..RefineConfig::default()
+    };
+    let mut heard = Vec::new();
+    let stats = refine(&mut map, &mut keyframes, k, &config, |i, _| {
+        heard.push(i);
+        // The second call is the round's first keyframe.
+        if heard.len() == 3 {
+            ControlFlow::Break(())
+        } else {
+            ControlFlow::Continue(())
+        }
+    })
+    .expect("refines");
+    assert_eq!(heard, [1, 2, 2]);
+    assert_eq!(stats.iterations, 2);
+    assert_eq!(stats.poses.refined, 2);
+}
+
+/// The hole filling after the final optimisation reports each kept keyframe as it goes (the
+/// mapper's heartbeat: 300 kept keyframes take 12 s), and fills what an empty map leaves open.
+#[test]
+fn hole_filling_reports_every_kept_keyframe() {
+    let mut room = small_room();
+    let k = room.intrinsics();
+    let seen = posed(&mut room, &[0, 3, 6]);
+    let mut kept = opengs_mapping::KeptKeyframes::new(10);
+    for (seq, (frame, pose)) in seen.iter().enumerate() {
+        kept.push(
+            seq as u64,
+            *pose,
+            k,
+            &frame.rgb,
+            &frame.depth,
+            frame.depth_scale,
+        )
+        .expect("one camera");
+    }
+    let mut map = opengs_splat::GaussianMap::default();
+    let mut heard = Vec::new();
+    let added = opengs_mapping::fill_holes(
+        &mut map,
+        &kept,
+        &opengs_mapping::MapperConfig::default(),
+        |done| {
+            heard.push(done);
+            ControlFlow::Continue(())
+        },
+    );
+    assert_eq!(heard, [1, 2, 3]);
+    assert!(
+        added > 0 && added == map.len(),
+        "{added} added, {} in the map",
+        map.len()
+    );
 }

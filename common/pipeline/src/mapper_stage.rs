@@ -1005,13 +1005,14 @@ pub fn run_mapper(ctx: &RunContext, out_dir: &Path, args: &MapperArgs) -> anyhow
         );
         let stop = AtomicBool::new(false);
         let (tx, rx) = std::sync::mpsc::channel::<(usize, f32)>();
-        finish_stats = std::thread::scope(|scope| {
-            // The optimisation runs on the pool; this thread keeps the IPC side (progress
-            // telemetry, termination requests), whose handles cannot leave it.
-            let (map, kept, pool, stop) = (&mut map, &mut kept, &pool, &stop);
+        let (stats, holes) = std::thread::scope(|scope| {
+            // The optimisation and the hole filling after it run on the pool; this thread
+            // keeps the IPC side (progress telemetry, the watchdog's heartbeat, termination
+            // requests), whose handles cannot leave it.
+            let (map, kept, pool, stop, config) = (&mut map, &mut kept, &pool, &stop, &config);
             let worker = scope.spawn(move || {
                 pool.install(|| {
-                    optimise_final(map, kept, steps, near, |done, loss| {
+                    let stats = optimise_final(map, kept, steps, near, |done, loss| {
                         // The receiver lives until the worker is joined.
                         let _ = tx.send((done, loss));
                         if stop.load(Ordering::Relaxed) {
@@ -1019,7 +1020,16 @@ pub fn run_mapper(ctx: &RunContext, out_dir: &Path, args: &MapperArgs) -> anyhow
                         } else {
                             ControlFlow::Continue(())
                         }
-                    })
+                    })?;
+                    let done = stats.as_ref().map_or(0, |s| s.iterations);
+                    let loss = stats.as_ref().map_or(f32::NAN, |s| s.last_loss);
+                    // Done even after a termination request, as before it had a heartbeat: a
+                    // few seconds that close what pruning opened.
+                    let holes = fill_holes(map, kept, config, |_| {
+                        let _ = tx.send((done, loss));
+                        ControlFlow::Continue(())
+                    });
+                    Ok::<_, opengs_mapping::RefineError>((stats, holes))
                 })
             });
             let (mut logged_tenth, mut last_log) = (0, Instant::now());
@@ -1049,9 +1059,10 @@ pub fn run_mapper(ctx: &RunContext, out_dir: &Path, args: &MapperArgs) -> anyhow
                 .map_err(|_| anyhow::anyhow!("the final optimisation panicked"))?;
             anyhow::Ok(result?)
         })?;
+        finish_stats = stats;
         let done = finish_stats.as_ref().map_or(0, |s| s.iterations);
         telemetry.progress(done as u32, steps as u32);
-        holes_filled = Some(pool.install(|| fill_holes(&mut map, &kept, &config)));
+        holes_filled = Some(holes);
         tracing::info!(
             "after the final optimisation: {} Gaussians where the kept keyframes saw holes",
             holes_filled.unwrap_or(0)
