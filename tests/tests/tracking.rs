@@ -107,10 +107,14 @@ fn kinect_noise_run_stays_under_three_centimetres() {
 /// matches what the pipeline reaches (millimetres), all without starting a stage.
 #[test]
 fn bench_track_times_the_tracker_alone() {
+    let dir = tempfile::tempdir().expect("tmp");
+    let per_frame = dir.path().join("frames.tsv");
     let output = Command::new(binary("opengs"))
         .args(["bench", "track", "--frames", "40", "--slow-ms", "100000"])
         .arg("--trajectory")
         .arg(fr1_xyz())
+        .arg("--frames-out")
+        .arg(&per_frame)
         .output()
         .expect("opengs bench track");
     let stdout = String::from_utf8_lossy(&output.stdout);
@@ -138,6 +142,22 @@ fn bench_track_times_the_tracker_alone() {
         .and_then(|v| v.parse().ok())
         .unwrap_or_else(|| panic!("no error figure in: {stdout}"));
     assert!(error_cm < 0.5, "{stdout}");
+    // `--frames-out`: a line per frame, whose errors make the printed RMSE.
+    let table = std::fs::read_to_string(&per_frame).expect("frames-out written");
+    let rows: Vec<Vec<&str>> = table
+        .lines()
+        .skip(1)
+        .map(|l| l.split('\t').collect())
+        .collect();
+    assert_eq!(rows.len(), 40, "{table}");
+    assert_eq!(rows[0][2], "Initial", "{table}");
+    assert!(rows[1..].iter().all(|r| r[2] == "Tracked"), "{table}");
+    let errors: Vec<f64> = rows
+        .iter()
+        .map(|r| r[5].parse().expect("error cm"))
+        .collect();
+    let rmse = (errors.iter().map(|e| e * e).sum::<f64>() / errors.len() as f64).sqrt();
+    assert!((rmse - error_cm).abs() < 0.002, "{rmse} against {error_cm}");
 }
 
 /// A recording that starts 0.8 s and 2.2 s before its next frames (fr2_desk from 40 s, scene

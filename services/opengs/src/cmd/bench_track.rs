@@ -23,6 +23,10 @@ pub struct BenchTrackArgs {
     /// registration, why the wide search ran and why a frame got no pose (0: every frame).
     #[arg(long, default_value_t = 50.0)]
     slow_ms: f64,
+    /// Write one line per frame to this file (tab-separated: frame, timestamp, status, ms,
+    /// fine iterations, position error in cm against the ground truth, why the wide search ran).
+    #[arg(long)]
+    frames_out: Option<std::path::PathBuf>,
 }
 
 struct Frame {
@@ -64,6 +68,8 @@ pub fn run(args: BenchTrackArgs) -> anyhow::Result<()> {
     // Iterations of each registered frame's last (fine) registration: what a frame's time
     // is made of, between the fine search's cost per iteration and the count.
     let mut iterations: Vec<usize> = Vec::with_capacity(n);
+    let mut lines =
+        String::from("frame\ttimestamp\tstatus\tms\titerations\terror_cm\twide_search\n");
     for (i, f) in frames.iter().enumerate() {
         // A start (and a start again) is at the truth: the error needs no alignment.
         if let Some(gt) = f.gt {
@@ -116,6 +122,16 @@ pub fn run(args: BenchTrackArgs) -> anyhow::Result<()> {
                 i.saturating_sub(1)
             );
         }
+        let error_cm =
+            f.gt.map(|gt| (out.pose.translation.vector - gt.translation.vector).norm() * 100.0);
+        lines.push_str(&format!(
+            "{i}\t{:.6}\t{:?}\t{ms:.2}\t{}\t{}\t{}\n",
+            f.timestamp,
+            out.status,
+            out.iterations,
+            error_cm.map_or("".into(), |e| format!("{e:.4}")),
+            out.wide_search.as_deref().unwrap_or("")
+        ));
         posed.push(out.status.has_pose().then(|| {
             f.gt.map(|gt| (out.pose.translation.vector - gt.translation.vector).norm_squared())
         }));
@@ -152,6 +168,9 @@ pub fn run(args: BenchTrackArgs) -> anyhow::Result<()> {
             max,
             iterations.len()
         );
+    }
+    if let Some(path) = &args.frames_out {
+        std::fs::write(path, &lines).with_context(|| format!("writing {}", path.display()))?;
     }
     let rmse = (scored > 0).then(|| (sq_err / scored as f64).sqrt() * 100.0);
     println!(
