@@ -253,7 +253,8 @@ fn a_stop_during_a_pose_round_ends_it_after_that_keyframe() {
     let mut heard = Vec::new();
     let stats = refine(&mut map, &mut keyframes, k, &config, |i, _| {
         heard.push(i);
-        // The second call is the round's first keyframe.
+        // Step 1's call, then the round after step 2 (its calls come before that step's own):
+        // stopped at the round's second keyframe.
         if heard.len() == 3 {
             ControlFlow::Break(())
         } else {
