@@ -186,9 +186,9 @@ impl std::fmt::Display for RefineStepMs {
 
 /// Optimises `map` for `config.iters` steps on `keyframes` (frame, camera-to-world pose;
 /// frames are `intrinsics`-sized), shuffling their order every pass. `progress(i, loss)`
-/// is called after step i (1-based), and again after each keyframe of a pose round that
-/// follows step i; `ControlFlow::Break` ends the refinement there (the map is pruned and
-/// kept as it is, e.g. on Ctrl-C).
+/// is called after step i (1-based); when a pose round follows step i, also after each of its
+/// keyframes, before step i's own call. `ControlFlow::Break` ends the refinement there (the
+/// map is pruned and kept as it is, e.g. on Ctrl-C).
 pub fn refine(
     map: &mut GaussianMap,
     keyframes: &mut [(RgbdFrame, Pose)],

@@ -236,7 +236,7 @@ fn keyframe_poses_are_aligned_to_the_map_halfway() {
 }
 
 /// A stop asked for during a pose round ends the refinement there, after the keyframe being
-/// aligned (a round over hundreds of keyframes would keep a Ctrl-C waiting for a minute).
+/// aligned (a round takes 0.16 s a keyframe: 15 s for the 103 of a 99 s recording).
 #[test]
 fn a_stop_during_a_pose_round_ends_it_after_that_keyframe() {
     let mut room = small_room();
@@ -268,7 +268,7 @@ fn a_stop_during_a_pose_round_ends_it_after_that_keyframe() {
 }
 
 /// The hole filling after the final optimisation reports each kept keyframe as it goes (the
-/// mapper's heartbeat: 300 kept keyframes take 12 s), and fills what an empty map leaves open.
+/// mapper's heartbeat: 61 kept keyframes took 2.4 s), and fills what an empty map leaves open.
 #[test]
 fn hole_filling_reports_every_kept_keyframe() {
     let mut room = small_room();

@@ -132,9 +132,11 @@ pub fn run(args: BenchTrackArgs) -> anyhow::Result<()> {
             error_cm.map_or("".into(), |e| format!("{e:.4}")),
             out.wide_search.as_deref().unwrap_or("")
         ));
-        posed.push(out.status.has_pose().then(|| {
-            f.gt.map(|gt| (out.pose.translation.vector - gt.translation.vector).norm_squared())
-        }));
+        posed.push(
+            out.status
+                .has_pose()
+                .then(|| error_cm.map(|e| (e / 100.0).powi(2))),
+        );
     }
     let lost = posed.iter().filter(|p| p.is_none()).count();
     let sq_errors: Vec<f64> = posed.iter().flatten().flatten().copied().collect();
