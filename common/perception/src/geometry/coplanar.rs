@@ -71,11 +71,15 @@ const FLAT_LIMIT: f32 = 0.5;
 
 /// A segment's plane and how well its patches fit it.
 #[derive(Debug, Clone, Copy)]
-struct Plane {
-    normal: [f32; 3],
-    centroid: [f32; 3],
-    pixels: u32,
-    planar: bool,
+pub(super) struct Plane {
+    /// Unit normal, facing the camera.
+    pub normal: [f32; 3],
+    pub centroid: [f32; 3],
+    /// The whole segment's pixels.
+    pub pixels: u32,
+    /// Of those, the pixels of the patches the plane was fitted on.
+    pub inliers: u32,
+    pub planar: bool,
 }
 
 fn dot(a: [f32; 3], b: [f32; 3]) -> f32 {
@@ -115,6 +119,11 @@ const SPAN_RATIO: f64 = 0.1;
 /// … whose middle eigenvalue (m², pixel-weighted mean) is at least this: centroids spread
 /// 2 cm or more both ways, not a line.
 const MIN_SPREAD: f64 = 0.02 * 0.02;
+
+/// Signed distance of a patch's centroid from a plane, positive on the camera's side.
+pub(super) fn plane_offset(st: &PatchStats, p: &Plane) -> f32 {
+    dot(p.normal, sub(st.centroid, p.centroid))
+}
 
 impl CoplanarRules {
     fn tolerance(&self, p: &Plane) -> f32 {
@@ -158,6 +167,7 @@ impl CoplanarRules {
                     },
                     centroid: [(c[0] / w) as f32, (c[1] / w) as f32, (c[2] / w) as f32],
                     pixels: w as u32,
+                    inliers: w as u32,
                     planar: len > 0.0,
                 }
             })
@@ -181,20 +191,29 @@ impl CoplanarRules {
     }
 
     fn on_plane(&self, st: &PatchStats, p: &Plane) -> bool {
-        let offset = dot(p.normal, sub(st.centroid, p.centroid));
+        self.parallel(st, p) && plane_offset(st, p).abs() <= self.tolerance(p)
+    }
+
+    /// Whether a patch's normal lies along the plane's, within `max_angle` or what the
+    /// frame's depth noise bends a patch of its size and depth by.
+    pub(super) fn parallel(&self, st: &PatchStats, p: &Plane) -> bool {
         let width = (st.pixels.max(1) as f32).sqrt();
         let allowance = self
             .max_angle
             .max(self.normal_noise * st.centroid[2].abs() / width);
         dot(st.normal, p.normal) >= allowance.min(FLAT_LIMIT).cos()
-            && offset.abs() <= self.tolerance(p)
     }
 
     /// Each segment's plane, fitted on the patches that lie on its all-patch mean plane; planar
     /// when those hold `min_inliers` of its pixels. A share, not a mean, so a few patches
     /// blended across the segment's border neither tilt the plane nor make a flat wall look
     /// curved.
-    fn planes(&self, stats: &[PatchStats], segment_of_patch: &[u32], count: usize) -> Vec<Plane> {
+    pub(super) fn planes(
+        &self,
+        stats: &[PatchStats],
+        segment_of_patch: &[u32],
+        count: usize,
+    ) -> Vec<Plane> {
         let all = Self::mean_planes(stats, segment_of_patch, count, |_| true);
         let mut planes = all.clone();
         for _ in 0..=PLANE_REFITS {
@@ -209,6 +228,7 @@ impl CoplanarRules {
             p.planar &= a.planar
                 && f64::from(p.pixels) >= f64::from(self.min_inliers) * f64::from(a.pixels.max(1));
             // Size is the whole segment's, not its inliers'.
+            p.inliers = p.pixels;
             p.pixels = a.pixels;
         }
         planes

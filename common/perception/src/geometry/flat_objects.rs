@@ -223,16 +223,16 @@ fn flat_and_outlined(
 }
 
 /// One colour region: its patches, pixels, mean colour and pixel bounding box.
-struct Region {
-    id: u32,
-    patches: Vec<u32>,
-    pixels: u64,
-    colour: [f32; 3],
-    bbox: [usize; 4],
+pub(super) struct Region {
+    pub id: u32,
+    pub patches: Vec<u32>,
+    pub pixels: u64,
+    pub colour: [f32; 3],
+    pub bbox: [usize; 4],
 }
 
 impl Region {
-    fn bbox_area(&self) -> u64 {
+    pub(super) fn bbox_area(&self) -> u64 {
         let [x0, y0, x1, y1] = self.bbox;
         ((x1 + 1 - x0) * (y1 + 1 - y0)) as u64
     }
@@ -251,20 +251,26 @@ impl Region {
         (sum / self.pixels.max(1) as f64).sqrt() as f32
     }
 
-    fn bbox_long_side(&self) -> u64 {
+    pub(super) fn bbox_long_side(&self) -> u64 {
         let [x0, y0, x1, y1] = self.bbox;
         (x1 + 1 - x0).max(y1 + 1 - y0) as u64
     }
 }
 
-struct Regions {
-    list: Vec<Region>,
+/// The connected sets of patches a union-find holds, as regions.
+pub(super) struct Regions {
+    pub list: Vec<Region>,
     /// Region id (its set root) of every patch.
-    of_patch: Vec<u32>,
+    pub of_patch: Vec<u32>,
 }
 
 impl Regions {
-    fn of(sets: &mut UnionFind, stats: &[PatchStats], patch_of: &[u32], width: usize) -> Self {
+    pub(super) fn of(
+        sets: &mut UnionFind,
+        stats: &[PatchStats],
+        patch_of: &[u32],
+        width: usize,
+    ) -> Self {
         let of_patch: Vec<u32> = (0..stats.len() as u32).map(|p| sets.find(p)).collect();
         let mut index = vec![usize::MAX; stats.len()];
         let mut list: Vec<Region> = Vec::new();
