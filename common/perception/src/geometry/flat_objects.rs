@@ -39,8 +39,9 @@ const REGION_STEP: f32 = 0.08;
 /// table), not an object's face (scene 3's striped book cover had one stripe of each colour
 /// in view: a stripe in a colour found nowhere else on the cover).
 const MIN_HOST_SHARE: f64 = 0.05;
-/// Largest flat object, as a share of the segment it lies in: the rest is the surface.
-const MAX_HOST_SHARE: f64 = 0.5;
+/// Largest object split off a surface (here and in [`super::raised`]), as a share of the
+/// segment it lies in: the rest is the surface.
+pub(super) const MAX_HOST_SHARE: f64 = 0.5;
 /// Pixels of the rest of the segment in the object's colour, per pixel of the object.
 const MAX_REPEAT: f64 = 0.25;
 /// Smallest share of its bounding box a flat object fills: pictures, mats and posters seen in

@@ -21,7 +21,7 @@
 
 use super::convexity::PatchEdge;
 use super::coplanar::{plane_offset, CoplanarRules};
-use super::flat_objects::Regions;
+use super::flat_objects::{Regions, MAX_HOST_SHARE};
 use super::patches::PatchStats;
 use crate::classic::union_find::UnionFind;
 
@@ -31,8 +31,6 @@ const HOST_SHARE: f64 = 0.02;
 const HOST_INLIERS: f64 = 0.5;
 /// Largest height above the host's plane: taller objects show depth steps and faces of their own.
 const MAX_RAISE: f32 = 0.1;
-/// Largest object, as a share of its host: the rest is the surface.
-const MAX_HOST_SHARE: f64 = 0.5;
 /// Smallest share of its bounding box an object fills: one piece, not a strip of patches
 /// blended along an occluding edge.
 const MIN_FILL: f64 = 0.5;
@@ -99,7 +97,8 @@ impl RaisedRules {
         let regions = Regions::of(&mut sets, stats, patch_of, width);
         let min_pixels = (f64::from(self.min_share) * total as f64) as u64;
         let mut next = count as u32;
-        let mut object_rise: Vec<(u32, f32)> = Vec::new();
+        // Mean height of each split object, by its id − count.
+        let mut heights: Vec<f32> = Vec::new();
         for r in &regions.list {
             let first = r.patches[0] as usize;
             if !raised[first] {
@@ -121,7 +120,7 @@ impl RaisedRules {
             for &p in &r.patches {
                 out[p as usize] = next;
             }
-            object_rise.push((next, mean_rise));
+            heights.push(mean_rise);
             next += 1;
         }
         // A patch blended across the object's edge rises by the share of its pixels on the
@@ -130,7 +129,9 @@ impl RaisedRules {
         let split = out.clone();
         for e in edges {
             for (inside, outside) in [(e.a as usize, e.b as usize), (e.b as usize, e.a as usize)] {
-                let Some(&(_, height)) = object_rise.iter().find(|(o, _)| *o == split[inside])
+                let Some(&height) = (split[inside] as usize)
+                    .checked_sub(count)
+                    .and_then(|k| heights.get(k))
                 else {
                     continue;
                 };
