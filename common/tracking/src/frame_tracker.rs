@@ -36,7 +36,7 @@ use crate::attempt::{register_verified, try_guesses, Attempt, Verified};
 use crate::model::{MapGaussians, ModelBuilder, ModelUpdate, TrackingModel};
 use crate::relocalise_worker::{GuessJob, RelocaliseWorker};
 use crate::verify::MotionPrior;
-use crate::{ConstantVelocity, Relocaliser, TrackerConfig};
+use crate::{depth_weighted, ConstantVelocity, Relocaliser, TrackerConfig};
 
 /// How a frame was tracked.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -405,9 +405,16 @@ impl FrameTracker {
         }
         let raw =
             estimate_covariances_on_grid(&samples, self.config.neighbours, Regularization::None)?;
+        let (from, until) = (
+            self.config.depth_weight_from,
+            self.config.depth_weight_until,
+        );
         let covariances = raw
             .iter()
-            .map(|c| regularize(c, self.config.regularization))
+            .zip(&samples.points)
+            .map(|(c, p)| {
+                depth_weighted(regularize(c, self.config.regularization), p.z, from, until)
+            })
             .collect();
         Ok((
             Cloud {

@@ -7,6 +7,7 @@
 
 mod attempt;
 mod config;
+mod depth_weight;
 mod frame_tracker;
 pub mod idle_time;
 mod model;
@@ -17,6 +18,7 @@ mod verify;
 mod visibility;
 
 pub use config::TrackerConfig;
+pub use depth_weight::{depth_scale, depth_weighted};
 pub use frame_tracker::{
     DepthFrame, FrameTracker, KeyframeKind, StartedAgain, TrackOutcome, TrackStatus,
     WorldKeyframeCloud,
