@@ -74,7 +74,7 @@ pub struct TrackerConfig {
     /// Depth beyond this (m) is ignored.
     pub max_depth: f64,
     /// Samples farther than this (m) weigh less in registration, as depth⁻⁴ (their noise
-    /// grows with depth², [`crate::depth_weighted`]), down to their weight at
+    /// grows with depth², [`crate::depth_scale`]), down to their weight at
     /// `depth_weight_until`; 0: all the same. Chosen on scene 2 along fr2_desk with noise
     /// (1 m against 1.5 and 2 m; depth⁻⁴ against depth⁻²), shown on the other rows
     /// (`README.md`, issue 17).

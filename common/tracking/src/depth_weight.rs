@@ -21,8 +21,6 @@
 //! are all beyond `until` keeps its answer (a common scale does not move the minimum).
 //! A keyframe's new points join the tracker's own model with the scale they were seen with.
 
-use opengs_geometry::nalgebra::Matrix3;
-
 /// The factor a covariance of a sample at depth `z` (m) is scaled by: 1 up to `from`,
 /// (z / from)⁴ up to `until`, (until / from)⁴ beyond; 1 everywhere when `from` is 0 (off).
 pub fn depth_scale(z: f64, from: f64, until: f64) -> f64 {
@@ -33,14 +31,10 @@ pub fn depth_scale(z: f64, from: f64, until: f64) -> f64 {
     }
 }
 
-/// `covariance` of a sample at depth `z` with its weight lowered by depth ([`depth_scale`]).
-pub fn depth_weighted(covariance: Matrix3<f64>, z: f64, from: f64, until: f64) -> Matrix3<f64> {
-    covariance * depth_scale(z, from, until)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use opengs_geometry::nalgebra::Matrix3;
     use opengs_gicp::factor::information;
     use opengs_gicp::{regularize, Regularization};
 
@@ -72,7 +66,7 @@ mod tests {
         let along_normal = |z: f64| {
             let omega = information(
                 &Matrix3::identity(),
-                &depth_weighted(disc, z, 1.0, 2.0),
+                &(disc * depth_scale(z, 1.0, 2.0)),
                 &disc,
             )
             .expect("invertible");

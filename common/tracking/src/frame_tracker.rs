@@ -36,7 +36,7 @@ use crate::attempt::{register_verified, try_guesses, Attempt, Verified};
 use crate::model::{MapGaussians, ModelBuilder, ModelUpdate, TrackingModel};
 use crate::relocalise_worker::{GuessJob, RelocaliseWorker};
 use crate::verify::MotionPrior;
-use crate::{depth_weighted, ConstantVelocity, Relocaliser, TrackerConfig};
+use crate::{depth_scale, ConstantVelocity, Relocaliser, TrackerConfig};
 
 /// How a frame was tracked.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -412,9 +412,7 @@ impl FrameTracker {
         let covariances = raw
             .iter()
             .zip(&samples.points)
-            .map(|(c, p)| {
-                depth_weighted(regularize(c, self.config.regularization), p.z, from, until)
-            })
+            .map(|(c, p)| regularize(c, self.config.regularization) * depth_scale(p.z, from, until))
             .collect();
         Ok((
             Cloud {

@@ -18,7 +18,7 @@ mod verify;
 mod visibility;
 
 pub use config::TrackerConfig;
-pub use depth_weight::{depth_scale, depth_weighted};
+pub use depth_weight::depth_scale;
 pub use frame_tracker::{
     DepthFrame, FrameTracker, KeyframeKind, StartedAgain, TrackOutcome, TrackStatus,
     WorldKeyframeCloud,
