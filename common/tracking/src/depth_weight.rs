@@ -17,8 +17,8 @@
 //!
 //! which divides the sample's weight by about as much once s(z) Σ_s outweighs Σ_t;
 //! nearer samples keep theirs. Beyond `until` it falls no further: far walls are what fix
-//! the pose when the near samples are one plane (a desk, the floor). A frame whose samples
-//! are all beyond `until` keeps its answer (a common scale does not move the minimum).
+//! the pose when the near samples are one plane (a desk, the floor). In a frame whose samples
+//! all lie beyond `until` every disc is scaled alike, so none outvotes another.
 //! A keyframe's new points join the tracker's own model with the scale they were seen with.
 
 /// The factor a covariance of a sample at depth `z` (m) is scaled by: 1 up to `from`,
