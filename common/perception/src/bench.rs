@@ -229,6 +229,32 @@ pub struct SegmentQuality {
     pub merge_share: f64,
     pub segments: f64,
     pub median_ms: f64,
+    /// Mean IoU of each object class over the frames showing it, lowest first: which
+    /// objects the segmenter loses.
+    pub class_iou: Vec<(String, f64)>,
+}
+
+/// Mean matched IoU per class name over `scores` (ids the table does not name count as
+/// `object <id>`), lowest first.
+fn class_means(
+    scores: &[crate::quality::FrameQuality],
+    classes: &[opengs_datasets::InstanceClass],
+) -> Vec<(String, f64)> {
+    let mut sums: std::collections::BTreeMap<String, (f64, usize)> = Default::default();
+    for (id, iou) in scores.iter().flat_map(|q| &q.object_iou) {
+        let name = classes
+            .iter()
+            .find(|c| c.id == *id)
+            .map_or_else(|| format!("object {id}"), |c| c.class.clone());
+        let entry = sums.entry(name).or_default();
+        *entry = (entry.0 + iou, entry.1 + 1);
+    }
+    let mut out: Vec<(String, f64)> = sums
+        .into_iter()
+        .map(|(name, (sum, n))| (name, sum / n as f64))
+        .collect();
+    out.sort_by(|a, b| a.1.total_cmp(&b.1));
+    out
 }
 
 /// Scores geometry, classic, prior and simulated (the SAM-like reference, default failure
@@ -273,6 +299,7 @@ pub fn segment_quality(
                 merge_share: mean(|q| q.merge_share),
                 segments: mean(|q| q.segments as f64),
                 median_ms: times.get(times.len() / 2).copied().unwrap_or(0.0),
+                class_iou: class_means(&scores, &bench.classes),
             })
         })
         .collect()
@@ -293,9 +320,22 @@ pub fn print_segment_quality(frames: usize, spec: &DatasetSpec) -> Result<(), Pe
             q.median_ms,
             q.frames,
         );
+        let lowest: Vec<String> = q
+            .class_iou
+            .iter()
+            .take(LOWEST_CLASSES)
+            .map(|(name, iou)| format!("{name} {:.2}", iou))
+            .collect();
+        println!(
+            "  lowest objects (mean IoU per class): {}",
+            lowest.join(", ")
+        );
     }
     Ok(())
 }
+
+/// Classes listed per segmenter by `print_segment_quality`.
+const LOWEST_CLASSES: usize = 6;
 
 fn available_cores() -> usize {
     std::thread::available_parallelism().map_or(1, |n| n.get())
@@ -582,6 +622,12 @@ mod tests {
         assert_eq!(prior.frames, 3);
         assert!((prior.miou - 100.0).abs() < 1e-9, "{prior:?}");
         assert_eq!((prior.split_share, prior.merge_share), (0.0, 0.0));
+        // Every class the room shows, each matched whole by the truth.
+        assert!(prior.class_iou.len() >= 10, "{:?}", prior.class_iou);
+        assert!(prior
+            .class_iou
+            .iter()
+            .all(|(_, iou)| (iou - 1.0).abs() < 1e-9));
         // Classic cuts the room's textures into patches; geometry does not.
         let (geometry, classic) = (by_name("geometry"), by_name("classic"));
         assert!(

@@ -19,13 +19,16 @@ use std::collections::HashMap;
 pub const SIGNIFICANT: f64 = 0.1;
 
 /// Scores of one frame, shares in [0, 1], `miou` in [0, 100].
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct FrameQuality {
     pub miou: f64,
     pub split_share: f64,
     pub merge_share: f64,
     pub objects: usize,
     pub segments: usize,
+    /// Every object of the frame (ground-truth id) with the IoU of its matched segment (0 when
+    /// unmatched), by id: which objects a segmenter loses.
+    pub object_iou: Vec<(u16, f64)>,
 }
 
 /// Scores `labels` (0 = none) against `truth` (0 = none); `None` when the
@@ -67,11 +70,12 @@ pub fn frame_quality(labels: &[u32], truth: &[u16]) -> Option<FrameQuality> {
         parts_of_segment[s] += (n as f64 >= SIGNIFICANT * b as f64) as usize;
     }
     let matched = max_weight_matching(&iou);
-    let total: f64 = matched
+    let object_iou: Vec<(u16, f64)> = matched
         .iter()
         .enumerate()
-        .filter_map(|(o, s)| s.map(|s| iou[o][s]))
-        .sum();
+        .map(|(o, s)| (objects[o], s.map_or(0.0, |s| iou[o][s])))
+        .collect();
+    let total: f64 = object_iou.iter().map(|&(_, v)| v).sum();
     let share = |parts: &[usize]| {
         if parts.is_empty() {
             0.0
@@ -85,6 +89,7 @@ pub fn frame_quality(labels: &[u32], truth: &[u16]) -> Option<FrameQuality> {
         merge_share: share(&parts_of_segment),
         objects: objects.len(),
         segments: segments.len(),
+        object_iou,
     })
 }
 
@@ -193,6 +198,7 @@ mod tests {
         let labels = [5, 5, 0, 0];
         let all = frame_quality(&labels, &truth).expect("objects");
         assert!((all.miou - 50.0).abs() < 1e-9, "{all:?}");
+        assert_eq!(all.object_iou, vec![(1, 0.5)]);
         let frame = opengs_datasets::RgbdFrame {
             index: 0,
             timestamp: 0.0,

@@ -62,6 +62,7 @@ mod convexity;
 mod coplanar;
 mod creases;
 mod flat_objects;
+mod levels;
 mod patches;
 mod raised;
 mod regions;
@@ -133,6 +134,10 @@ pub struct GeometryParams {
     /// Smallest height of such an object above the surface's plane, per metre of depth (0.004:
     /// 5 mm at 1.3 m, over a Kinect's ~5 mm depth steps there; chosen on scene 1's datasets).
     pub raised_min_raise: f32,
+    /// Smallest face of a stack of flat objects (books on a desk), as a share of the frame;
+    /// a segment with faces at two or more heights above its surface is split into one object
+    /// per height ([`levels`]); 0 turns the split off.
+    pub level_min_share: f32,
     /// Seeds the per-frame shuffle of label ids.
     pub seed: u64,
 }
@@ -161,6 +166,7 @@ impl Default for GeometryParams {
             flat_min_share: 0.005,
             raised_min_share: 0.003,
             raised_min_raise: 0.004,
+            level_min_share: 0.0005,
             seed: 0x6e0_5e9,
         }
     }
@@ -202,6 +208,7 @@ impl GeometrySegmenter {
                 params.flat_min_share,
                 params.raised_min_share,
                 params.raised_min_raise,
+                params.level_min_share,
             ]
             .into_iter()
             .all(|x| x.is_finite() && x >= 0.0)
@@ -322,9 +329,27 @@ impl GeometrySegmenter {
             &segment_of_patch,
             count,
         );
-        let confidence =
+        let mut confidence =
             regions::segment_confidence(&self.edges, &verdicts, &segment_of_patch, count);
-        let segments = regions::paint_and_fill_holes(&patches.of, &segment_of_patch, coarse.width);
+        let hosts = raised::host_planes(&coplanar, &patches.stats, &segment_of_patch, count);
+        let mut segments =
+            regions::paint_and_fill_holes(&patches.of, &segment_of_patch, coarse.width);
+        let parents = levels::LevelRules {
+            min_share: p.raised_min_share,
+            min_level_share: p.level_min_share,
+            min_raise: p.raised_min_raise,
+        }
+        .split(
+            &mut segments,
+            count,
+            &geometry,
+            coarse.width,
+            &hosts,
+            &mut self.sets,
+        );
+        // A piece split off by height keeps the evidence of the segment it came from.
+        let inherited: Vec<f32> = parents.iter().map(|&s| confidence[s as usize]).collect();
+        confidence.extend(inherited);
         (segments, confidence)
     }
 }

@@ -20,7 +20,7 @@
 //! of its desk's stripe colours comes apart as well as one in its own.
 
 use super::convexity::PatchEdge;
-use super::coplanar::{plane_offset, CoplanarRules};
+use super::coplanar::{plane_offset, CoplanarRules, Plane};
 use super::flat_objects::{Regions, MAX_HOST_SHARE};
 use super::patches::PatchStats;
 use crate::classic::union_find::UnionFind;
@@ -34,6 +34,26 @@ const MAX_RAISE: f32 = 0.1;
 /// Smallest share of its bounding box an object fills: one piece, not a strip of patches
 /// blended along an occluding edge.
 const MIN_FILL: f64 = 0.5;
+
+/// Each segment's plane when it is a host (a surface things lie on), else `None`.
+pub(super) fn host_planes(
+    planes: &CoplanarRules,
+    stats: &[PatchStats],
+    segment_of_patch: &[u32],
+    count: usize,
+) -> Vec<Option<Plane>> {
+    let total: u64 = stats.iter().map(|s| u64::from(s.pixels)).sum();
+    let host_pixels = (HOST_SHARE * total as f64) as u32;
+    planes
+        .dominant_planes(stats, segment_of_patch, count)
+        .into_iter()
+        .map(|p| {
+            let host = p.inliers >= host_pixels
+                && f64::from(p.inliers) >= HOST_INLIERS * f64::from(p.pixels);
+            host.then_some(p)
+        })
+        .collect()
+}
 
 /// Thresholds of the raised-object split.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -64,19 +84,17 @@ impl RaisedRules {
             return (out, count);
         }
         let planes = &self.planes;
-        let fitted = planes.planes(stats, segment_of_patch, count);
+        let hosts = host_planes(planes, stats, segment_of_patch, count);
         let total: u64 = stats.iter().map(|s| u64::from(s.pixels)).sum();
-        let host_pixels = (HOST_SHARE * total as f64) as u32;
         // Height above the host's plane of every patch that could lie on a host (parallel to
         // its plane), else None.
         let rise: Vec<Option<f32>> = stats
             .iter()
             .zip(segment_of_patch)
             .map(|(st, &s)| {
-                let p = &fitted[s as usize];
-                let host = p.inliers >= host_pixels
-                    && f64::from(p.inliers) >= HOST_INLIERS * f64::from(p.pixels);
-                (host && planes.parallel(st, p)).then(|| plane_offset(st, p))
+                hosts[s as usize]
+                    .filter(|p| planes.parallel(st, p))
+                    .map(|p| plane_offset(st, &p))
             })
             .collect();
         let raised: Vec<bool> = rise
@@ -104,7 +122,7 @@ impl RaisedRules {
             if !raised[first] {
                 continue;
             }
-            let host = u64::from(fitted[segment_of_patch[first] as usize].pixels);
+            let host = hosts[segment_of_patch[first] as usize].map_or(0, |p| u64::from(p.pixels));
             if r.pixels < min_pixels
                 || r.pixels as f64 > MAX_HOST_SHARE * host as f64
                 || (r.pixels as f64) < MIN_FILL * r.bbox_area() as f64
