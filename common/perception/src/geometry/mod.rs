@@ -32,9 +32,15 @@
 //!    up to shading join ([`creases`]: a sofa's seat and back); a flat, plain,
 //!    compact piece of a surface in a colour found nowhere else on it is split
 //!    off ([`flat_objects`]: a picture on a wall, where no depth cue is left);
-//!    last, a connected piece of a mostly planar segment that lies parallel to
+//!    then a connected piece of a mostly planar segment that lies parallel to
 //!    its plane and a little above it is split off by height alone
-//!    ([`raised`]: a keyboard on a desk, 1–2 cm proud, in any colour).
+//!    ([`raised`]: a keyboard on a desk, 1–2 cm proud, in any colour); last,
+//!    the same test pixel by pixel on the painted segments ([`levels`]): a
+//!    face parallel to a host surface and above it is an object when it lies in
+//!    the host (a keyboard too narrow for whole patches), and a segment with
+//!    such faces at two or more heights is a stack, split one object per
+//!    height (books on a desk). A host's plane is fitted from its dominant
+//!    face, so a desk seen with its legs is one.
 //! 5. Holes without depth take the single segment around them, else 0.
 //! 6. Confidence = boundary-length-weighted mean evidence of the segment's
 //!    cut boundaries (a depth step is 1, a colour cut at most 0.5).
