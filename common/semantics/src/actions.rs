@@ -126,7 +126,8 @@ impl Decisions {
 
     /// Fragments inside a matched segment and mostly in view: a part each time (decay);
     /// absorbed whole, hidden Gaussians included, once they were fragments in
-    /// `absorb_after_views` keyframes in a row and C_s > C_r: the decision is about the label,
+    /// `absorb_after_views` keyframes in a row, and in no fewer than the keyframes they were
+    /// matched on their own, and C_s > C_r: the decision is about the label,
     /// not these pixels. A large label barely in view is no fragment; an object that the
     /// segmenter merges with its support now and then is matched on its own in between.
     fn decide_absorbed(e: &Evidence, table: &GlobalLabelTable, d: &mut Decisions) {
@@ -136,7 +137,10 @@ impl Decisions {
             }
             d.parts.insert(r);
             let streak = table.fragment_streak(r).saturating_add(1);
-            if streak < e.config.absorb_after_views || conf(e.conf_s, s) <= conf(e.conf_r, r) {
+            // As many views in a row inside its support as it was seen on its own: a keyboard
+            // matched alone in 17 keyframes is not given to its desk by the last 3, far off.
+            let needed = e.config.absorb_after_views.max(table.own_matches(r));
+            if streak < needed || conf(e.conf_s, s) <= conf(e.conf_r, r) {
                 d.kept_fragments.push(r);
             } else {
                 d.move_whole_label(r, t, RelabelScope::Label);

@@ -54,8 +54,9 @@ pub struct ConsensusConfig {
     /// Completeness (§5.2) a fragment needs to be absorbed: most of the label is in view, so
     /// a large label seen as a sliver inside a segment is not mistaken for a fragment.
     pub absorb_min_completeness: f32,
-    /// Keyframes in a row a label must be a fragment before it is absorbed; a Full or
-    /// Majority match of its own in between starts the count again.
+    /// Keyframes in a row a label must be a fragment before it is absorbed (and at least as
+    /// many as it had a Full or Majority match of its own); such a match in between starts the
+    /// count again.
     pub absorb_after_views: u32,
     /// A departure from the paper (§5.5): a Whole merge won by the input moves every Gaussian
     /// of a part that is mostly in view (completeness ≥ `absorb_min_completeness`), hidden

@@ -124,7 +124,7 @@ impl LabelConsensus {
             self.table.set_confidence(r, c);
         }
         for &r in matching.full.values().chain(matching.majority.values()) {
-            self.table.clear_fragment_streak(r);
+            self.table.note_own_match(r);
         }
         for &r in &d.kept_fragments {
             self.table.note_fragment(r);

@@ -30,6 +30,10 @@ pub struct GlobalLabel {
     /// another label (§5.5); a Full or Majority match of its own resets it.
     #[serde(default)]
     pub fragment_streak: u32,
+    /// Keyframes in which this label had a Full or Majority match of its own: absorbing it as
+    /// a fragment takes at least as many fragment views in a row (§5.5).
+    #[serde(default)]
+    pub own_matches: u32,
 }
 
 /// One row of `labels.json`; the Gaussian count comes from the map owner.
@@ -141,6 +145,7 @@ impl GlobalLabelTable {
                 observations: 0,
                 part_decays: 0,
                 fragment_streak: 0,
+                own_matches: 0,
             },
         );
         Ok(id)
@@ -172,6 +177,7 @@ impl GlobalLabelTable {
                 observations: 0,
                 part_decays: 0,
                 fragment_streak: 0,
+                own_matches: 0,
             },
         );
         self.next_id = self.next_id.max(id.saturating_add(1));
@@ -220,10 +226,16 @@ impl GlobalLabelTable {
         }
     }
 
-    /// Matched as an object of its own: the fragment streak starts again.
-    pub fn clear_fragment_streak(&mut self, id: u32) {
+    /// Keyframes in which `id` was matched on its own (0 for unknown labels).
+    pub fn own_matches(&self, id: u32) -> u32 {
+        self.labels.get(&id).map_or(0, |l| l.own_matches)
+    }
+
+    /// Matched as an object of its own: counted, and the fragment streak starts again.
+    pub fn note_own_match(&mut self, id: u32) {
         if let Some(label) = self.labels.get_mut(&id) {
             label.fragment_streak = 0;
+            label.own_matches = label.own_matches.saturating_add(1);
         }
     }
 

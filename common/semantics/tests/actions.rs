@@ -761,3 +761,26 @@ fn a_fragment_is_absorbed_on_its_third_view_in_a_row_and_a_match_of_its_own_rest
     assert!(absorbed(&inside.run(&mut consensus)));
     assert!(consensus.table().get(2).is_none());
 }
+
+#[test]
+fn a_label_matched_on_its_own_five_times_takes_five_fragment_views_to_absorb() {
+    let inside = fragment_scene(0.8, 1.0);
+    let mut alone = Scene::new(20, 20);
+    alone.input_rows(18..20, 7, 0.5);
+    alone.rendered_rows(18..20, 2);
+    let mut consensus = consensus_with(&[0.5, 0.6], config());
+    for _ in 0..5 {
+        alone.run(&mut consensus);
+    }
+    assert_eq!(consensus.table().own_matches(2), 5);
+    let absorbed = |out: &opengs_semantics::ConsensusOutput| {
+        out.relabels.iter().any(|r| r.scope == RelabelScope::Label)
+    };
+    // Its own matches raised C_r to 0.6 at most (max(C_r, C_s = 0.5)); four views inside 5 decay
+    // it to 0.36 < C_s = 0.8 and keep it, the fifth absorbs it.
+    for view in 1..5 {
+        assert!(!absorbed(&inside.run(&mut consensus)), "view {view}");
+    }
+    assert!(absorbed(&inside.run(&mut consensus)));
+    assert!(consensus.table().get(2).is_none());
+}
