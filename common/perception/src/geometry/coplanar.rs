@@ -220,8 +220,7 @@ impl CoplanarRules {
         segment_of_patch: &[u32],
         count: usize,
     ) -> Vec<Plane> {
-        let all = Self::mean_planes(stats, segment_of_patch, count, |_| true);
-        self.refit(stats, segment_of_patch, count, all.clone(), &all)
+        self.fit(stats, segment_of_patch, count, 0)
     }
 
     /// [`Self::planes`] started from each segment's dominant face instead of its mean: the
@@ -235,9 +234,21 @@ impl CoplanarRules {
         segment_of_patch: &[u32],
         count: usize,
     ) -> Vec<Plane> {
+        self.fit(stats, segment_of_patch, count, DOMINANT_STEPS)
+    }
+
+    /// The mean plane of each segment, moved `dominant_steps` times towards its dominant face,
+    /// then refitted on its inliers.
+    fn fit(
+        &self,
+        stats: &[PatchStats],
+        segment_of_patch: &[u32],
+        count: usize,
+        dominant_steps: usize,
+    ) -> Vec<Plane> {
         let all = Self::mean_planes(stats, segment_of_patch, count, |_| true);
         let mut start = all.clone();
-        for _ in 0..DOMINANT_STEPS {
+        for _ in 0..dominant_steps {
             let near: Vec<bool> = stats
                 .iter()
                 .zip(segment_of_patch)

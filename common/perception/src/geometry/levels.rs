@@ -129,36 +129,25 @@ impl LevelRules {
         let valid = |i: usize| segments[i] != NO_SEGMENT && geo.points[i][2] > 0.0;
         let total = (0..n).filter(|&i| valid(i)).count() as f64;
         let reference = reference_hosts(segments, width, count, host_planes);
-        let rise: Vec<Option<f32>> = (0..n)
+        // Height above its host's plane of every pixel with one, and whether it is level.
+        let (rise, level): (Vec<Option<f32>>, Vec<bool>) = (0..n)
             .map(|i| {
-                if !valid(i) {
-                    return None;
-                }
-                let plane =
-                    reference[segments[i] as usize].and_then(|h| host_planes[h as usize])?;
+                let plane = valid(i)
+                    .then(|| reference[segments[i] as usize])
+                    .flatten()
+                    .and_then(|h| host_planes[h as usize]);
+                let Some(plane) = plane else {
+                    return (None, false);
+                };
                 let p = geo.points[i];
-                Some(dot(
-                    plane.normal,
-                    [
-                        p[0] - plane.centroid[0],
-                        p[1] - plane.centroid[1],
-                        p[2] - plane.centroid[2],
-                    ],
-                ))
+                let c = plane.centroid;
+                let r = dot(plane.normal, [p[0] - c[0], p[1] - c[1], p[2] - c[2]]);
+                let level = dot(geo.normals[i], plane.normal) >= LEVEL_ANGLE.cos()
+                    && r >= self.min_raise * p[2]
+                    && r <= MAX_LEVEL;
+                (Some(r), level)
             })
-            .collect();
-        let level: Vec<bool> = (0..n)
-            .map(|i| {
-                rise[i].is_some_and(|r| {
-                    let s = segments[i] as usize;
-                    let plane = reference[s].and_then(|h| host_planes[h as usize]);
-                    let z = geo.points[i][2];
-                    plane.is_some_and(|p| dot(geo.normals[i], p.normal) >= LEVEL_ANGLE.cos())
-                        && r >= self.min_raise * z
-                        && r <= MAX_LEVEL
-                })
-            })
-            .collect();
+            .unzip();
         // Faces: level neighbours of one segment at one height.
         sets.reset(n, 0.0);
         let same_face = |a: usize, b: usize| {
@@ -240,44 +229,49 @@ impl LevelRules {
                     by_segment.entry(f.segment).or_default().push(k);
                 }
             }
-            // Faces left in a host beside a segment standing on it: the bottom book of a stack
-            // is often in its desk's segment (a 3 cm step), its exposed top a U round the
-            // books above, which no fill test admits as an object of its own.
+            // Stacks of their own: faces at two heights or more.
+            let stacks: Vec<(u32, Vec<usize>)> = by_segment
+                .into_iter()
+                .filter(|(_, own)| self.group_by_height(&faces, own.clone()).len() >= 2)
+                .collect();
+            // Faces left in a host beside a stack standing on it: the bottom book of a stack is
+            // often in its desk's segment (a 3 cm step), its exposed top a U round the books
+            // above, which no fill test admits as an object of its own. A box's top and a strip
+            // blended along its edge are no stack, so they take none.
             let mut beside: std::collections::BTreeMap<u32, Vec<usize>> = Default::default();
-            for i in 0..n {
-                let right = ((i + 1) % width != 0).then_some(i + 1);
-                let down = (i + width < n).then_some(i + width);
-                for j in [right, down].into_iter().flatten() {
-                    for (a, b) in [(i, j), (j, i)] {
-                        let (k, s) = (face_of[a], segments[b]);
-                        if k == u32::MAX || s == NO_SEGMENT || face_segment[k as usize].is_some() {
-                            continue;
-                        }
-                        let f = &faces[k as usize];
-                        let adopts = host_planes[s as usize].is_none()
-                            && reference[s as usize] == Some(f.segment)
-                            && host_planes[f.segment as usize].is_some()
-                            && f64::from(f.pixels) >= min_level;
-                        if adopts {
-                            let list = beside.entry(s).or_default();
-                            if !list.contains(&(k as usize)) {
-                                list.push(k as usize);
+            let is_stack = |s: u32| stacks.iter().any(|(t, _)| *t == s);
+            if !stacks.is_empty() {
+                for i in 0..n {
+                    let right = ((i + 1) % width != 0).then_some(i + 1);
+                    let down = (i + width < n).then_some(i + width);
+                    for j in [right, down].into_iter().flatten() {
+                        for (a, b) in [(i, j), (j, i)] {
+                            let (k, s) = (face_of[a], segments[b]);
+                            if k == u32::MAX
+                                || s == NO_SEGMENT
+                                || face_segment[k as usize].is_some()
+                            {
+                                continue;
+                            }
+                            let f = &faces[k as usize];
+                            let adopts = is_stack(s)
+                                && reference[s as usize] == Some(f.segment)
+                                && host_planes[f.segment as usize].is_some()
+                                && f64::from(f.pixels) >= min_level;
+                            if adopts {
+                                let list = beside.entry(s).or_default();
+                                if !list.contains(&(k as usize)) {
+                                    list.push(k as usize);
+                                }
                             }
                         }
                     }
                 }
             }
-            for (s, own) in by_segment {
-                let mut groups = self.group_by_height(&faces, own.clone());
-                if groups.len() < 2 {
-                    continue;
-                }
-                // A stack of its own (two heights or more): host faces beside it join it. A
-                // box's top and a strip blended along its edge are not one.
-                if let Some(extra) = beside.get(&s) {
-                    let all: Vec<usize> = own.iter().chain(extra).copied().collect();
-                    groups = self.group_by_height(&faces, all);
-                }
+            for (s, own) in stacks {
+                let extra = beside.get(&s).into_iter().flatten();
+                let all: Vec<usize> = own.iter().chain(extra).copied().collect();
+                let groups = self.group_by_height(&faces, all);
                 let mut levels = Vec::with_capacity(groups.len());
                 for (g, group) in groups.iter().enumerate() {
                     // The lowest level keeps the segment's id.
@@ -304,10 +298,8 @@ impl LevelRules {
             if s == NO_SEGMENT {
                 continue;
             }
-            if let Some(id) = face_of
-                .get(i)
-                .and_then(|&k| face_segment.get(k as usize).copied().flatten())
-            {
+            // Level pixels of a face that became a segment; `face_of` is u32::MAX for the rest.
+            if let Some(id) = face_segment.get(face_of[i] as usize).copied().flatten() {
                 segments[i] = id;
             } else if let (Some(levels), Some(r)) = (stack_levels.get(&s), rise[i]) {
                 // Under the lowest top at or above it, within the noise allowance.
