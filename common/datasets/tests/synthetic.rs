@@ -287,9 +287,63 @@ fn area_sampling_averages_stripes_finer_than_a_pixel() {
 }
 
 #[test]
-fn area_sampling_leaves_coarse_texture_alone() {
-    // Bands of 10 cm are 12.5 pixels wide: one sample per pixel, the same image.
-    assert_eq!(striped_wall_view(5.0, true), striped_wall_view(5.0, false));
+fn area_sampling_blends_coarse_band_edges_by_coverage() {
+    // Bands of 10 cm (5 per metre, 12.5 pixels wide): a pixel inside a band keeps its one
+    // sample; a pixel across an edge records each band by its share of the pixel, as a
+    // sensor does, where one sample drew a staircase of whole bands.
+    let frequency = 5.0;
+    let area = striped_wall_view(frequency, true);
+    let point = striped_wall_view(frequency, false);
+    // Pixel u of the centre row spans wall y in [y(u − ½), y(u + ½)], y(u) = 2 ± 0.008 (u − 320)
+    // (head-on, 4 m, f = 500): the share of band a (phase < ½ of 5y + 0.371) in that span.
+    let band_a_upto = |x: f64| x.floor() * 0.5 + (x - x.floor()).min(0.5);
+    let share_a = |u: f64, sign: f64| {
+        let x = |u: f64| (2.0 + sign * 0.008 * (u - 320.0)) * frequency + 0.371;
+        let (x0, x1) = (x(u - 0.5), x(u + 0.5));
+        (band_a_upto(x0.max(x1)) - band_a_upto(x0.min(x1))) / (x1 - x0).abs()
+    };
+    // Grey of a pixel holding `share` of a (0.2) and the rest of b (0.6), as written.
+    let grey = |share: f64| ((0.2 + 0.4 * (1.0 - share)) * 255.0 + 0.5).floor();
+    let row = |img: &[u8], u: usize| img[(240 * 641 + u) * 3] as f64;
+    let us = 100..540; // on the +x wall (y from 0.24 to 3.76 m)
+                       // The image's u runs along +y or −y: the point samples say which.
+    let sign = [1.0, -1.0]
+        .into_iter()
+        .find(|&sign| {
+            us.clone().all(|u| {
+                let centre = share_a(u as f64, sign) > 0.99 || share_a(u as f64, sign) < 0.01;
+                !centre || row(&point, u) == grey(share_a(u as f64, sign).round())
+            })
+        })
+        .expect("the point-sampled bands match one direction of the wall");
+    let (mut edges, mut area_err, mut point_err) = (0, 0.0, 0.0);
+    for u in us {
+        let share = share_a(u as f64, sign);
+        if !(0.01..=0.99).contains(&share) {
+            assert_eq!(row(&area, u), row(&point, u), "pixel {u} inside a band");
+            continue;
+        }
+        // 4 × 4 jittered samples: the stratum across the edge (a quarter of them) may
+        // miscount by at most its weight, ¼ of the 102 grey levels between the bands.
+        let err = (row(&area, u) - grey(share)).abs();
+        assert!(
+            err <= 26.5,
+            "pixel {u}: share {share:.2}, {} vs {}",
+            row(&area, u),
+            grey(share)
+        );
+        edges += 1;
+        area_err += err;
+        point_err += (row(&point, u) - grey(share)).abs();
+    }
+    let (area_err, point_err) = (area_err / edges as f64, point_err / edges as f64);
+    eprintln!("{edges} edge pixels: mean error area {area_err:.2}, point {point_err:.2}");
+    assert!(edges >= 30, "{edges} pixels across an edge");
+    assert!(area_err <= 8.0, "mean error {area_err}");
+    assert!(
+        point_err >= 3.0 * area_err,
+        "one sample per pixel: {point_err}"
+    );
 }
 
 #[test]

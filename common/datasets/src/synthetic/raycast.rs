@@ -243,14 +243,18 @@ pub const MAX_PIXEL_SAMPLES: usize = 4;
 
 /// The albedo a camera pixel records: the texture averaged over the pixel's
 /// footprint on the surface, as a sensor integrates light over its area.
-/// One sample at `p` where the footprint is under half the texture's finest
-/// detail; otherwise an n × n grid over the footprint (n ≤
-/// `MAX_PIXEL_SAMPLES`), on the hit's tangent plane, so no ray is cast again.
-/// Each sample is jittered inside its cell (from `pixel`, so a pose always
-/// renders the same): a regular grid finer than the cap allows would fall on
-/// one phase of a periodic texture and alias again. Point-sampling fine
-/// stripes or wood rings at a distance draws moiré that no real camera
-/// records and no 3D map can reproduce from another view.
+/// Where the footprint is wider than half the texture's finest detail, an
+/// n × n grid over the footprint (n ≤ `MAX_PIXEL_SAMPLES`), on the hit's
+/// tangent plane, so no ray is cast again. Where it is narrower, one sample
+/// at `p`, unless the texture has hard edges (cells, bands, mortar) and one
+/// crosses the pixel (a footprint corner differs from the centre): then the
+/// full grid, so the pixel holds the share of each side. Each sample is
+/// jittered inside its cell (from `pixel`, so a pose always renders the
+/// same): a regular grid finer than the cap allows would fall on one phase of
+/// a periodic texture and alias again. Point-sampling fine stripes or wood
+/// rings at a distance draws moiré, and point-sampling a checker edge at any
+/// distance a staircase, that no real camera records and no 3D map can
+/// reproduce from another view.
 pub fn pixel_albedo(
     hit: &SurfaceHit,
     p: &Point3<f64>,
@@ -270,9 +274,20 @@ pub fn pixel_albedo(
     }
     let axes = pixel_steps.map(|s| (s - dir * (hit.normal.dot(s) / n_dir)) * hit.t);
     let footprint = axes[0].norm().max(axes[1].norm());
-    let n = ((2.0 * footprint / feature).ceil() as usize).clamp(1, MAX_PIXEL_SAMPLES);
+    let mut n = ((2.0 * footprint / feature).ceil() as usize).clamp(1, MAX_PIXEL_SAMPLES);
     if n == 1 {
-        return hit.texture.albedo(p);
+        let centre = hit.texture.albedo(p);
+        if !hit.texture.has_hard_edges() {
+            return centre;
+        }
+        // A feature at least twice the footprint cannot fit between the corners unseen.
+        let flat = [(-0.5, -0.5), (0.5, -0.5), (-0.5, 0.5), (0.5, 0.5)]
+            .iter()
+            .all(|&(du, dv)| hit.texture.albedo(&(p + axes[0] * du + axes[1] * dv)) == centre);
+        if flat {
+            return centre;
+        }
+        n = MAX_PIXEL_SAMPLES;
     }
     let mut sum = [0.0f32; 3];
     let mut state = pixel.wrapping_mul(GOLDEN_GAMMA) ^ 0xD1B5_4A32_D192_ED03;

@@ -71,6 +71,16 @@ impl Texture {
         }
     }
 
+    /// Whether the colour jumps (checker cells, bands, mortar lines) rather than blends
+    /// (noise, wood rings): a pixel across such an edge must average its footprint at
+    /// any distance (`raycast::pixel_albedo`).
+    pub fn has_hard_edges(&self) -> bool {
+        matches!(
+            self,
+            Texture::Checker { .. } | Texture::Stripes { .. } | Texture::Bricks { .. }
+        )
+    }
+
     /// Surface colour (linear 0..1) at world point `p`.
     pub fn albedo(&self, p: &Point3<f64>) -> Rgb {
         match *self {

@@ -377,7 +377,7 @@ fn dataset(
     );
     let dir = root.join("data").join(name);
     let marker = dir.join("complete");
-    // A folder of an older generator (before area-sampled colour) is written again.
+    // A folder of an older generator (point-sampled colour or edges) is written again.
     let current = std::fs::read_to_string(&marker).is_ok_and(|m| m.trim() == GENERATOR);
     if !current {
         eprintln!(
@@ -396,7 +396,8 @@ fn dataset(
 }
 
 /// What a dataset folder's `complete` marker holds: the frames it was written with.
-const GENERATOR: &str = "opengs synthetic generator 2: area-sampled colour";
+const GENERATOR: &str =
+    "opengs synthetic generator 3: area-sampled colour, texture edges at any distance";
 
 fn run_case(
     case: &Case,
