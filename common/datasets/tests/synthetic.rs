@@ -305,21 +305,23 @@ fn area_sampling_blends_coarse_band_edges_by_coverage() {
     // Grey of a pixel holding `share` of a (0.2) and the rest of b (0.6), as written.
     let grey = |share: f64| ((0.2 + 0.4 * (1.0 - share)) * 255.0 + 0.5).floor();
     let row = |img: &[u8], u: usize| img[(240 * 641 + u) * 3] as f64;
-    let us = 100..540; // on the +x wall (y from 0.24 to 3.76 m)
-                       // The image's u runs along +y or −y: the point samples say which.
+    // Pixels on the +x wall (y from 0.24 to 3.76 m).
+    let us = 100..540;
+    let inside_a_band = |share: f64| !(1e-9..=1.0 - 1e-9).contains(&share);
+    // The image's u runs along +y or −y: the point samples inside the bands say which.
     let sign = [1.0, -1.0]
         .into_iter()
         .find(|&sign| {
             us.clone().all(|u| {
-                let centre = share_a(u as f64, sign) > 0.99 || share_a(u as f64, sign) < 0.01;
-                !centre || row(&point, u) == grey(share_a(u as f64, sign).round())
+                let share = share_a(u as f64, sign);
+                !inside_a_band(share) || row(&point, u) == grey(share.round())
             })
         })
         .expect("the point-sampled bands match one direction of the wall");
     let (mut edges, mut area_err, mut point_err) = (0, 0.0, 0.0);
     for u in us {
         let share = share_a(u as f64, sign);
-        if !(0.01..=0.99).contains(&share) {
+        if inside_a_band(share) {
             assert_eq!(row(&area, u), row(&point, u), "pixel {u} inside a band");
             continue;
         }
