@@ -737,17 +737,24 @@ fn a_label_straddling_two_segments_is_no_fragment() {
     assert_relative_eq!(conf(&consensus, 2), 0.1);
 }
 
-#[test]
-fn a_fragment_is_absorbed_on_its_third_view_in_a_row_and_a_match_of_its_own_restarts_the_count() {
-    let inside = fragment_scene(0.8, 1.0);
-    // Input 7 on rows 18..20 only: its own Full match (a = b = 1).
+/// Input 7 on rows 18..20 only, over label 2: its own Full match (a = b = 1).
+fn own_match_scene() -> Scene {
     let mut alone = Scene::new(20, 20);
     alone.input_rows(18..20, 7, 0.5);
     alone.rendered_rows(18..20, 2);
+    alone
+}
+
+/// Whether a keyframe's output absorbed a whole label.
+fn absorbed(out: &opengs_semantics::ConsensusOutput) -> bool {
+    out.relabels.iter().any(|r| r.scope == RelabelScope::Label)
+}
+
+#[test]
+fn a_fragment_is_absorbed_on_its_third_view_in_a_row_and_a_match_of_its_own_restarts_the_count() {
+    let inside = fragment_scene(0.8, 1.0);
+    let alone = own_match_scene();
     let mut consensus = consensus_with(&[0.5, 0.6], config());
-    let absorbed = |out: &opengs_semantics::ConsensusOutput| {
-        out.relabels.iter().any(|r| r.scope == RelabelScope::Label)
-    };
     // Two views inside 5: decayed twice, kept.
     assert!(!absorbed(&inside.run(&mut consensus)));
     assert!(!absorbed(&inside.run(&mut consensus)));
@@ -765,17 +772,12 @@ fn a_fragment_is_absorbed_on_its_third_view_in_a_row_and_a_match_of_its_own_rest
 #[test]
 fn a_label_matched_on_its_own_five_times_takes_five_fragment_views_to_absorb() {
     let inside = fragment_scene(0.8, 1.0);
-    let mut alone = Scene::new(20, 20);
-    alone.input_rows(18..20, 7, 0.5);
-    alone.rendered_rows(18..20, 2);
+    let alone = own_match_scene();
     let mut consensus = consensus_with(&[0.5, 0.6], config());
     for _ in 0..5 {
         alone.run(&mut consensus);
     }
     assert_eq!(consensus.table().own_matches(2), 5);
-    let absorbed = |out: &opengs_semantics::ConsensusOutput| {
-        out.relabels.iter().any(|r| r.scope == RelabelScope::Label)
-    };
     // Its own matches raised C_r to 0.6 at most (max(C_r, C_s = 0.5)); four views inside 5 decay
     // it to 0.36 < C_s = 0.8 and keep it, the fifth absorbs it.
     for view in 1..5 {
