@@ -3,7 +3,7 @@
 //! report RMSE *and* mean (GS-ICP SLAM prints the mean under the name RMSE).
 
 use crate::TimedPose;
-use nalgebra::{Isometry3, Matrix3, Point3, Rotation3, Translation3, UnitQuaternion, Vector3};
+use nalgebra::{Isometry3, Point3};
 
 /// TUM's usual association window (seconds).
 pub const DEFAULT_MAX_TIME_DIFFERENCE: f64 = 0.02;
@@ -72,11 +72,8 @@ pub fn associate(
     pairs
 }
 
-/// Umeyama without scale: the rigid `T` minimising `Σ |dst_i − T src_i|²`.
-///
-/// With centred points, `C = 1/n Σ d_i s_iᵀ = U D Vᵀ`, `R = U S Vᵀ` where
-/// `S = diag(1, 1, det(U)·det(V))` keeps R a rotation (no reflection), and
-/// `t = μ_dst − R μ_src`.
+/// Umeyama without scale: the rigid `T` minimising `Σ |dst_i − T src_i|²`
+/// ([`opengs_geometry::rigid_fit`]), with the reason when there is none.
 pub fn umeyama_rigid(src: &[Point3<f64>], dst: &[Point3<f64>]) -> Result<Isometry3<f64>, AteError> {
     if src.len() != dst.len() {
         return Err(AteError::LengthMismatch(src.len(), dst.len()));
@@ -87,30 +84,8 @@ pub fn umeyama_rigid(src: &[Point3<f64>], dst: &[Point3<f64>]) -> Result<Isometr
             needed: 3,
         });
     }
-    let n = src.len() as f64;
-    let mu_src = src.iter().fold(Vector3::zeros(), |a, p| a + p.coords) / n;
-    let mu_dst = dst.iter().fold(Vector3::zeros(), |a, p| a + p.coords) / n;
-    let cross = src.iter().zip(dst).fold(Matrix3::zeros(), |c, (s, d)| {
-        c + (d.coords - mu_dst) * (s.coords - mu_src).transpose()
-    }) / n;
-    let svd = cross.svd(true, true);
-    let (u, v_t) = svd
-        .u
-        .zip(svd.v_t)
-        .ok_or_else(|| AteError::Alignment("SVD did not converge".into()))?;
-    // Singular values are unordered in nalgebra: flip the column of the smallest.
-    let smallest = svd.singular_values.imin();
-    let mut s = Vector3::repeat(1.0);
-    if u.determinant() * v_t.determinant() < 0.0 {
-        s[smallest] = -1.0;
-    }
-    let r = u * Matrix3::from_diagonal(&s) * v_t;
-    if !r.iter().all(|x| x.is_finite()) {
-        return Err(AteError::Alignment("rotation is not finite".into()));
-    }
-    let rotation = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(r));
-    let t = mu_dst - rotation * mu_src;
-    Ok(Isometry3::from_parts(Translation3::from(t), rotation))
+    opengs_geometry::rigid_fit(src, dst)
+        .ok_or_else(|| AteError::Alignment("no finite rigid fit (SVD failed)".into()))
 }
 
 /// ATE of already paired positions.
@@ -165,6 +140,7 @@ pub fn absolute_trajectory_error(
 mod tests {
     use super::*;
     use approx::assert_relative_eq;
+    use nalgebra::Vector3;
     use std::f64::consts::FRAC_PI_2;
 
     fn timed(t: f64, p: Point3<f64>) -> TimedPose {

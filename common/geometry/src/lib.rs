@@ -8,9 +8,11 @@ mod intrinsics;
 pub mod memory;
 mod ply;
 mod pose;
+mod rigid_fit;
 
 pub use intrinsics::Intrinsics;
 pub use ply::{read_vertex_table, PlyError, VertexTable};
 pub use pose::{format_tum_pose, parse_tum_pose, pose_from_tum, pose_to_tum, Pose, PoseParseError};
+pub use rigid_fit::rigid_fit;
 
 pub use nalgebra;

@@ -13,7 +13,9 @@
 //! 4. [`register`] runs Gauss-Newton or Levenberg-Marquardt on SE(3) and
 //!    reports the pose, fit statistics and the keyframe overlap fraction;
 //!    [`register_coarse_to_fine`] runs it wide on a coarse [`CoarseToFineTarget`]
-//!    first, so jumps of 10 cm and 5° between frames converge.
+//!    first, so jumps of 10 cm and 5° between frames converge,
+//! 5. [`register_global`] finds a cloud in a model with no guess ([`fpfh`] features
+//!    and RANSAC), for relocalisation far from anywhere the tracker has been.
 //!
 //! Threads: everything parallel runs on the current rayon pool; wrap calls
 //! in `pool.install(..)` of a local `rayon::ThreadPool` to bound them.
@@ -30,6 +32,8 @@ mod config;
 mod covariance;
 mod error;
 pub mod factor;
+mod fpfh;
+mod global;
 mod grid_covariance;
 mod kdtree;
 pub mod lie;
@@ -49,6 +53,8 @@ pub use covariance::{
     covariance_from_gaussian, estimate_covariances, regularize, Regularization, DEFAULT_NEIGHBOURS,
 };
 pub use error::GicpError;
+pub use fpfh::{fpfh, oriented_normals, Fpfh, FPFH_LEN};
+pub use global::{register_global, FeatureCloud, GlobalConfig, GlobalMatch};
 pub use grid_covariance::estimate_covariances_on_grid;
 pub use kdtree::PointTree;
 pub use neighbour_grid::NeighbourGrid;

@@ -17,7 +17,8 @@
 //! (nothing in front of the measured depth). A frame that fails is lost: it
 //! is reported with the last verified pose and status `Lost`, makes no
 //! keyframe and adds nothing to the model. While lost, a relocalisation guess
-//! ([`crate::Relocaliser`]) is tried every 0.15 s until one verifies: in the pipeline on
+//! ([`crate::Relocaliser`]; from the spell's second attempt on, global registration's
+//! hypotheses too) is tried every 0.15 s until one verifies: in the pipeline on
 //! a thread of its own ([`crate::relocalise_worker`]), so a lost frame costs what a
 //! tracked one does. Until ten frames after the start are verified, the start does not
 //! stand: a frame that fails starts tracking again at itself instead of being lost
@@ -772,11 +773,15 @@ impl FrameTracker {
                             intrinsics: *frame.intrinsics,
                             cloud: cloud.clone(),
                             guesses: guesses.clone(),
+                            viewpoints: spell.relocaliser.viewpoints().to_vec(),
                             model: Arc::clone(&model),
                         })
                     });
                 if !submitted {
-                    match try_guesses(&model, &self.config, frame, &cloud, &guesses) {
+                    // Global registration (a few hundred ms) never on the spell's first
+                    // frame, which most often ends the spell.
+                    let viewpoints = (!first).then(|| spell.relocaliser.viewpoints());
+                    match try_guesses(&model, &self.config, frame, &cloud, &guesses, viewpoints) {
                         Ok(r) => {
                             self.lost = None;
                             return self.accept(

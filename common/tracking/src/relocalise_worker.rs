@@ -10,6 +10,7 @@ use std::sync::mpsc::{channel, Receiver, Sender};
 use std::sync::Arc;
 use std::thread::JoinHandle;
 
+use opengs_geometry::nalgebra::Point3;
 use opengs_geometry::{Intrinsics, Pose};
 use opengs_gicp::{Cloud, Registration};
 
@@ -27,6 +28,8 @@ pub(crate) struct GuessJob {
     pub intrinsics: Intrinsics,
     pub cloud: Cloud,
     pub guesses: Vec<Pose>,
+    /// Where the keyframes were taken: global registration runs when the guesses fail.
+    pub viewpoints: Vec<Point3<f64>>,
     pub model: Arc<TrackingModel>,
 }
 
@@ -60,7 +63,14 @@ impl RelocaliseWorker {
                         intrinsics: &job.intrinsics,
                         timestamp: job.timestamp,
                     };
-                    let result = try_guesses(&job.model, &config, &frame, &job.cloud, &job.guesses);
+                    let result = try_guesses(
+                        &job.model,
+                        &config,
+                        &frame,
+                        &job.cloud,
+                        &job.guesses,
+                        Some(&job.viewpoints),
+                    );
                     let answer = GuessAnswer {
                         spell: job.spell,
                         timestamp: job.timestamp,
