@@ -779,7 +779,7 @@ impl FrameTracker {
                     });
                 if !submitted {
                     // Global registration (a few hundred ms) never on the spell's first
-                    // frame, which most often ends the spell.
+                    // attempt, which most often ends the spell.
                     let viewpoints = (!first).then(|| spell.relocaliser.viewpoints());
                     match try_guesses(&model, &self.config, frame, &cloud, &guesses, viewpoints) {
                         Ok(r) => {

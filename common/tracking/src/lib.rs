@@ -2,8 +2,8 @@
 //! motion it was not tuned on: coarse-to-fine G-ICP of each frame's depth
 //! samples from a constant-velocity prediction, every result verified, lost
 //! frames reported as lost (no keyframe, no Gaussians), relocalisation from
-//! several guesses and global registration until a result verifies again, the keyframe rule, and a
-//! model built off the tracking path.
+//! several guesses and global registration until a result verifies again, the
+//! keyframe rule, and a model built off the tracking path.
 
 mod attempt;
 mod config;
