@@ -4,14 +4,15 @@
 //! somewhere else (fr2_desk's 12 s gap: 2–4.5 m + rad from every keyframe) needs this.
 //!
 //! 1. Both clouds thinned to `voxel`, normals from the covariances, [`fpfh`] features.
-//! 2. Correspondences: each source point's nearest target point in feature space, kept
-//!    when the pair are each other's nearest (mutual).
+//! 2. Correspondences: for an even subset of `match_points` source points, the nearest
+//!    target point in feature space, kept when the pair are each other's nearest (mutual).
 //! 3. RANSAC: three correspondences at random; their triangle must have about the same
 //!    sides in both clouds (`edge_similarity`) and the fit of the three must bring each
 //!    within `inlier_distance`, else the sample is dropped; a fit that passes is scored
-//!    by its fitness: the share of all source points with a target point within
-//!    `inlier_distance`.
-//! 4. The best few hypotheses, each refitted to its inlier correspondences.
+//!    by its fitness on an even subset of `score_points` source points: the share with
+//!    a target point within `inlier_distance`.
+//! 4. The best few hypotheses, each refitted to its inlier correspondences, their
+//!    fitness over all source points.
 //!
 //! The answers are starting points, not results: the caller registers from them and
 //! verifies.
@@ -226,7 +227,7 @@ pub fn register_global(
         {
             continue;
         }
-        // Scored on the whole cloud, not the correspondences: in a room most features
+        // Scored by the frame's points on the model, not the correspondences: in a room most features
         // lie on planes and match at random, so a right pose has few correspondences
         // but puts most of the frame on the model.
         validated += 1;
