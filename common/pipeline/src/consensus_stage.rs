@@ -53,10 +53,13 @@ pub enum Ablation {
     /// Every Partial part that beats ℓr takes a fresh label (§5.5; the paper's table), also one
     /// that holds most of ℓr.
     NoPartialKeeper,
+    /// No Inside for a segment mostly over unlabelled Gaussians beside held labels (§5.5; not
+    /// in the paper): an object the map once left unlabelled stays so.
+    NoUnlabelledSplit,
 }
 
 impl Ablation {
-    pub const ALL: [Ablation; 10] = [
+    pub const ALL: [Ablation; 11] = [
         Self::NoCounterPruning,
         Self::NoConfidenceUpdate,
         Self::NoPartDecay,
@@ -67,6 +70,7 @@ impl Ablation {
         Self::NoFragmentAbsorb,
         Self::NoWholeLabelMerge,
         Self::NoPartialKeeper,
+        Self::NoUnlabelledSplit,
     ];
 
     pub fn as_str(&self) -> &'static str {
@@ -81,6 +85,7 @@ impl Ablation {
             Self::NoFragmentAbsorb => "no-fragment-absorb",
             Self::NoWholeLabelMerge => "no-whole-label-merge",
             Self::NoPartialKeeper => "no-partial-keeper",
+            Self::NoUnlabelledSplit => "no-unlabelled-split",
         }
     }
 
@@ -96,6 +101,7 @@ impl Ablation {
             Self::NoFragmentAbsorb => config.absorb_fragments = false,
             Self::NoWholeLabelMerge => config.merge_whole_labels = false,
             Self::NoPartialKeeper => config.partial_majority_keeps = false,
+            Self::NoUnlabelledSplit => config.split_unlabelled_objects = false,
         }
     }
 }

@@ -68,6 +68,13 @@ pub struct ConsensusConfig {
     /// table seen whole but for a sliver takes a fresh label over the pixels of this view,
     /// and its hidden side stays on the old one.
     pub partial_majority_keeps: bool,
+    /// A departure from the paper (§5.5): a segment mostly over unlabelled Gaussians (under
+    /// half of its pixels render a label), all of whose labelled pixels lie in labels that
+    /// other segments of the view hold, each of which it covers under τ3, is Inside: an
+    /// object beside a held surface that the map left unlabelled. Off, such an object (a box
+    /// on a table, once sent to "other") stays unlabelled for good: too few of its pixels
+    /// are mapped for Inside's τ2, and the table's fringe on it is over τ3 for New.
+    pub split_unlabelled_objects: bool,
 }
 
 impl Default for ConsensusConfig {
@@ -91,6 +98,7 @@ impl Default for ConsensusConfig {
             absorb_after_views: 3,
             merge_whole_labels: true,
             partial_majority_keeps: true,
+            split_unlabelled_objects: true,
         }
     }
 }

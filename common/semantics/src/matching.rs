@@ -119,7 +119,12 @@ impl Matching {
                     holder.entry(r).or_insert((s, false));
                 }
             }
-            for &s in inputs.iter().filter(|s| !m.full.contains_key(s)) {
+            let unmatched: Vec<u32> = inputs
+                .iter()
+                .copied()
+                .filter(|s| !m.full.contains_key(s))
+                .collect();
+            for s in unmatched {
                 // Inside one label another input label Full-matches.
                 let cands = partners(s)
                     .filter(|&(r, _, _, a, _, _)| a >= config.tau_part && full_r.contains(&r))
@@ -128,6 +133,21 @@ impl Matching {
                 if let Some((r, _)) = best(cands) {
                     m.inside.insert(s, r);
                     continue;
+                }
+                // Or mostly over unlabelled Gaussians, the labelled rest all in held labels of
+                // which ℓs is a sliver: an object beside them that the map left unlabelled.
+                let held_by_other = |r: u32| holder.get(&r).is_some_and(|&(h, _)| h != s);
+                let mapped = mapped_area(s);
+                if config.split_unlabelled_objects
+                    && mapped > 0
+                    && 2 * u64::from(mapped) < u64::from(area(s))
+                    && partners(s)
+                        .all(|(r, ..)| held_by_other(r) && overlap.ratios(s, r).1 < config.tau_min)
+                {
+                    let held: Vec<(u32, u32)> = partners(s).map(|(r, i, ..)| (r, i)).collect();
+                    if m.insert_inside(s, &held) {
+                        continue;
+                    }
                 }
                 // Or, together, inside labels held by input labels that do not touch ℓs: the
                 // map gave an object the label of something apart from it. A Majority-held
@@ -144,14 +164,7 @@ impl Matching {
                     .collect();
                 let inside: u64 = held.iter().map(|&(_, i)| u64::from(i)).sum();
                 if inside as f64 >= config.tau_part * f64::from(mapped_area(s)) {
-                    if let Some((r, _)) = best(held.clone()) {
-                        m.inside.insert(s, r);
-                        let also: Vec<u32> =
-                            held.iter().map(|&(h, _)| h).filter(|&h| h != r).collect();
-                        if !also.is_empty() {
-                            m.inside_also.insert(s, also);
-                        }
-                    }
+                    m.insert_inside(s, &held);
                 }
             }
         }
@@ -207,6 +220,22 @@ impl Matching {
             m.fragments = fragments(overlap, &m, &claimed, config);
         }
         m
+    }
+}
+
+impl Matching {
+    /// ℓs Inside the held label (ℓr, I) it shares most with (ties: smallest ℓr); the other
+    /// held labels under it go with it. False when nothing is held.
+    fn insert_inside(&mut self, s: u32, held: &[(u32, u32)]) -> bool {
+        let Some(&(r, _)) = held.iter().max_by_key(|&&(r, i)| (i, u32::MAX - r)) else {
+            return false;
+        };
+        self.inside.insert(s, r);
+        let also: Vec<u32> = held.iter().map(|&(h, _)| h).filter(|&h| h != r).collect();
+        if !also.is_empty() {
+            self.inside_also.insert(s, also);
+        }
+        true
     }
 }
 

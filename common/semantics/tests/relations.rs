@@ -3,7 +3,7 @@
 mod common;
 
 use common::{consensus_with, Scene};
-use opengs_semantics::{pair_relation, ConsensusConfig, PairRelation, Relation};
+use opengs_semantics::{pair_relation, ConsensusConfig, LabelTarget, PairRelation, Relation};
 
 /// One input label (1) and one rendered label (1) laid out on a line:
 /// `s_only` input-only pixels, then `shared`, then `r_only` rendered-only pixels.
@@ -230,4 +230,104 @@ fn other_when_segment_straddles_two_labels() {
     let out = scene.run(&mut consensus);
     assert_eq!(out.assignments[0].relation, Relation::Other);
     assert!(out.consistent_label_map.iter().all(|&l| l == 0));
+}
+
+/// A table in two map labels (1 left, 3 right) over `rows` rows of 20 pixels, each held whole
+/// by its segment (1, 3), and a box on it (segment 2: rows 10..20, columns 5..15, 100 pixels)
+/// whose Gaussians the map left unlabelled inside a fringe `fringe` pixels wide that renders the
+/// table's labels (the fringe of width 1 is 36 pixels, 18 on each label).
+fn box_on_a_table_left_unlabelled(rows: usize, fringe: usize) -> Scene {
+    let mut scene = Scene::new(20, rows);
+    for row in 0..rows {
+        let at = row * 20;
+        scene
+            .input_span(at..at + 10, 1, 0.9)
+            .input_span(at + 10..at + 20, 3, 0.9);
+        scene
+            .rendered_span(at..at + 10, 1)
+            .rendered_span(at + 10..at + 20, 3);
+    }
+    for row in 10..20 {
+        scene.input_span(row * 20 + 5..row * 20 + 15, 2, 0.9);
+    }
+    for row in 10 + fringe..20 - fringe {
+        scene.rendered_span(row * 20 + 5 + fringe..row * 20 + 15 - fringe, 0);
+    }
+    scene
+}
+
+fn box_pixels() -> Vec<usize> {
+    (10..20)
+        .flat_map(|row| row * 20 + 5..row * 20 + 15)
+        .collect()
+}
+
+#[test]
+fn an_object_left_unlabelled_beside_held_labels_takes_a_fresh_label() {
+    let scene = box_on_a_table_left_unlabelled(40, 1);
+    // Mapped 36 < 50 of 100; a = 18/100 per label, over τ3: not New; a over the mapped pixels
+    // 0.5 per label, under τ2: not Inside one label; b = 18/382 < τ3 for both.
+    let mut consensus = consensus_with(&[0.5, 0.5, 0.5], ConsensusConfig::default());
+    let out = scene.run(&mut consensus);
+    let of = |s: u32| {
+        out.assignments
+            .iter()
+            .find(|a| a.input_label == s)
+            .expect("assigned")
+    };
+    assert_eq!(of(2).relation, Relation::Inside);
+    let fresh = 4;
+    assert_eq!(of(2).target, LabelTarget::Label(fresh));
+    assert!(box_pixels()
+        .iter()
+        .all(|&p| out.consistent_label_map[p] == fresh));
+    // Over the box's 100 pixels the Gaussians of both table labels (the fringe) move to the
+    // box's label; nothing else moves.
+    let moved: Vec<(u32, u32, usize)> = out
+        .relabels
+        .iter()
+        .map(|r| (r.from, r.to, r.pixels.len()))
+        .collect();
+    assert_eq!(moved, vec![(1, fresh, 100), (3, fresh, 100)]);
+    assert_eq!(
+        (of(1).relation, of(3).relation),
+        (Relation::Full, Relation::Full)
+    );
+
+    // Off: the box is "other" and stays unlabelled.
+    let off = ConsensusConfig {
+        split_unlabelled_objects: false,
+        ..ConsensusConfig::default()
+    };
+    let out = scene.run(&mut consensus_with(&[0.5, 0.5, 0.5], off));
+    assert_eq!(box_relation(&out), Relation::Other);
+    assert!(box_pixels()
+        .iter()
+        .all(|&p| out.consistent_label_map[p] == 0));
+}
+
+fn box_relation(out: &opengs_semantics::ConsensusOutput) -> Relation {
+    out.assignments
+        .iter()
+        .find(|a| a.input_label == 2)
+        .expect("assigned")
+        .relation
+}
+
+#[test]
+fn a_segment_mostly_labelled_or_a_share_of_its_labels_is_not_split_off() {
+    // Half the rows: b = 18/168 = 0.107 ≥ τ3 for both labels, which may be of its own surface.
+    let short = box_on_a_table_left_unlabelled(20, 1);
+    let out = short.run(&mut consensus_with(
+        &[0.5, 0.5, 0.5],
+        ConsensusConfig::default(),
+    ));
+    assert_eq!(box_relation(&out), Relation::Other);
+    // A fringe 2 pixels wide: 64 of its 100 pixels render a label, so it is not unlabelled.
+    let labelled = box_on_a_table_left_unlabelled(40, 2);
+    let out = labelled.run(&mut consensus_with(
+        &[0.5, 0.5, 0.5],
+        ConsensusConfig::default(),
+    ));
+    assert_eq!(box_relation(&out), Relation::Other);
 }
