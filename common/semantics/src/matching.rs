@@ -13,7 +13,8 @@ pub struct Matching {
     /// ℓs → ℓr of Full matches (one-to-one).
     pub full: BTreeMap<u32, u32>,
     /// ℓs → ℓr: ℓs lies (a ≥ τ2) inside rendered labels that other input labels hold (Full,
-    /// or Majority at b < τ3); ℓr is the one it shares most with.
+    /// or Majority at b < τ3), or lies mostly over unlabelled Gaussians with the rest in held
+    /// labels of which it is a sliver (b < τ3); ℓr is the one it shares most with.
     pub inside: BTreeMap<u32, u32>,
     /// ℓs → the other held labels it lies over (ascending), relabelled with ℓr.
     pub inside_also: BTreeMap<u32, Vec<u32>>,
