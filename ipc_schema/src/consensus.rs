@@ -12,7 +12,7 @@ pub const MAX_CONSENSUS_ENTRIES: u32 = 1 << 20;
 
 /// A label change: `from` → `to` for the Gaussians in the top-K of pixels
 /// `pixels[offset .. offset + count]` ([`PixelRun::SCOPE_PIXELS`]), or for every Gaussian
-/// labelled `from` ([`PixelRun::SCOPE_LABEL`]).
+/// labelled `from` (the other scopes).
 #[derive(Debug, Clone, Copy, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
 #[repr(C)]
 pub struct PixelRun {
@@ -31,6 +31,9 @@ impl PixelRun {
     pub const SCOPE_LABEL: u32 = 1;
     /// Every Gaussian labelled `from` changes, wherever it lies (a Whole merge).
     pub const SCOPE_MERGED: u32 = 2;
+    /// Every Gaussian labelled `from` changes where `from` lies on the surface of `to`, after
+    /// the consistent label map labelled the unlabelled ones (a fresh label split off `to`).
+    pub const SCOPE_REJOIN: u32 = 3;
 }
 
 /// A counter-pruning region (docs/METHOD.md §5.3): Gaussians labelled `label` (ℓr) in the top-K of
@@ -197,7 +200,7 @@ fn check_runs(parts: &ConsensusResult, n: usize) -> Result<(), SchemaError> {
     if parts
         .relabels
         .iter()
-        .any(|r| r.scope > PixelRun::SCOPE_MERGED)
+        .any(|r| r.scope > PixelRun::SCOPE_REJOIN)
     {
         return Err(SchemaError::Invalid("relabel run with an unknown scope"));
     }

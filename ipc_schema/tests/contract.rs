@@ -365,9 +365,9 @@ fn consensus_round_trip_and_rejects() {
         ..parts
     };
     assert!(hdr.encode(&bad, as_uninit_mut(payload)).is_err());
-    // A relabel scope that is none of pixels, label, merged: refused on encode and on decode.
+    // A relabel scope that is none of pixels, label, merged, rejoin: refused on encode and decode.
     let bad_scope = [PixelRun {
-        scope: 3,
+        scope: 4,
         ..relabels[0]
     }];
     let bad = ConsensusResult {
@@ -377,9 +377,13 @@ fn consensus_round_trip_and_rejects() {
     assert!(hdr.encode(&bad, as_uninit_mut(payload)).is_err());
     hdr.encode(&parts, as_uninit_mut(payload)).expect("encode");
     // label map 6·4 + mapping 2·8 bytes, then the run's from, to, offset, count, scope.
-    payload[56..60].copy_from_slice(&3u32.to_ne_bytes());
+    payload[56..60].copy_from_slice(&4u32.to_ne_bytes());
     assert!(matches!(hdr.decode(payload), Err(SchemaError::Invalid(_))));
-    for scope in [PixelRun::SCOPE_LABEL, PixelRun::SCOPE_MERGED] {
+    for scope in [
+        PixelRun::SCOPE_LABEL,
+        PixelRun::SCOPE_MERGED,
+        PixelRun::SCOPE_REJOIN,
+    ] {
         payload[56..60].copy_from_slice(&scope.to_ne_bytes());
         assert_eq!(
             hdr.decode(payload).expect("decode").result.relabels[0].scope,

@@ -911,7 +911,7 @@ impl Target for Consensus {
             assert!(run.iter().all(|&px| (px as usize) < n));
         }
         assert!(r.pixels.iter().all(|&px| (px as usize) < n));
-        assert!(r.relabels.iter().all(|x| x.scope <= PixelRun::SCOPE_MERGED));
+        assert!(r.relabels.iter().all(|x| x.scope <= PixelRun::SCOPE_REJOIN));
         let mut s = Sections::new(p);
         s.next(r.label_map);
         s.next(r.mapping);

@@ -11,7 +11,8 @@
 //!   the rule also labels Gaussians of keyframes the (slow) segmenter skipped.
 //! - Order: relabels via G_topK, then counter-pruning selection (so a Gaussian just moved to
 //!   a fresh label is not pruned as a counter of its old one), then unlabelled Gaussians
-//!   take labels, then the counter Gaussians are removed.
+//!   take labels, then split-off labels rejoin their holder where they lie on its surface
+//!   (they need the Gaussians just labelled), then the counter Gaussians are removed.
 
 use std::collections::{BTreeMap, VecDeque};
 
@@ -21,7 +22,7 @@ use opengs_semantics::{
 };
 use opengs_splat::{render_into, Adam, Camera, GaussianMap, RenderRequest, Rendered, TopK};
 
-use crate::fragment::lies_on_host;
+use crate::fragment::{lies_on_host, median_offset_from_host, FRAGMENT_MAX_OFFSET_M};
 
 /// Renders kept at most while their consensus is outstanding (the segmenter works on the
 /// newest keyframe only, so more would be stale).
@@ -86,6 +87,8 @@ pub struct ConsensusApplied {
     pub pruned: usize,
     /// Labels the consensus absorbed whole that stay: they stand off their host's surface.
     pub kept_off_host: Vec<u32>,
+    /// Fresh labels split off a held label that went back to it: they lie on its surface.
+    pub rejoined: Vec<u32>,
 }
 
 #[derive(Debug, thiserror::Error)]
@@ -266,6 +269,7 @@ impl SemanticLoop {
             .map_err(invalid)?
         };
         let labelled = label_unlabelled(map, &render, update.consistent_label_map);
+        let rejoined = rejoin_on_host(map, update.relabels);
         if !counters.is_empty() {
             let mut remove = vec![false; map.len()];
             for &i in &counters {
@@ -285,8 +289,29 @@ impl SemanticLoop {
             labelled,
             pruned: counters.len(),
             kept_off_host,
+            rejoined,
         })
     }
+}
+
+/// [`RelabelScope::Rejoin`]: a fresh label, now on the Gaussians the consistent label map
+/// labelled, goes back whole to the label it was split off where it lies on that label's
+/// surface (a piece of floor the map left unlabelled, not a cup beside the floor's segment).
+/// Returns the labels that went back.
+fn rejoin_on_host(map: &mut GaussianMap, relabels: &[RelabelInstruction]) -> Vec<u32> {
+    let mut rejoined = Vec::new();
+    for r in relabels.iter().filter(|r| r.scope == RelabelScope::Rejoin) {
+        let on_host = median_offset_from_host(map, r.from, r.to)
+            .is_some_and(|offset| offset <= FRAGMENT_MAX_OFFSET_M);
+        if r.from == r.to || !on_host {
+            continue;
+        }
+        for label in map.labels.iter_mut().filter(|l| **l == r.from) {
+            *label = r.to;
+        }
+        rejoined.push(r.from);
+    }
+    rejoined
 }
 
 /// Pixels whose labelled Gaussians weigh less than [`MIN_LABELLED_COVER`] render 0 (see the

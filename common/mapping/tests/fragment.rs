@@ -1,10 +1,11 @@
 //! A label absorbed whole must lie on its host's surface (docs/METHOD.md §5.5): offsets measured
-//! on hand-built planes, and the mapper keeping a label that stands off its host.
+//! on hand-built planes, the mapper keeping a label that stands off its host, and a label split
+//! off a surface going back to it where it lies on it.
 
 use approx::assert_relative_eq;
 use opengs_geometry::{Intrinsics, Pose};
 use opengs_mapping::{
-    lies_on_host, median_offset_from_host, ConsensusUpdate, Mapper, MapperConfig,
+    lies_on_host, median_offset_from_host, ConsensusApplied, ConsensusUpdate, Mapper, MapperConfig,
 };
 use opengs_semantics::{RelabelInstruction, RelabelScope};
 use opengs_splat::{Camera, Gaussian, GaussianMap};
@@ -88,11 +89,8 @@ fn the_host_plane_follows_the_gaussians_rotation() {
     assert!(lies_on_host(&map, 2, 1));
 }
 
-/// The floor strip (2) and the cup (3) relabelled to the floor (1) with `scope`, seen by a
-/// camera 1 m above the floor: how many moved, which were kept back, the labels' sizes after.
-fn relabel_strip_and_cup(scope: RelabelScope) -> (usize, Vec<u32>, [Option<u32>; 3]) {
-    let mut m = Mapper::with_map(MapperConfig::default(), floor_strip_and_cup());
-    // Looking down at the floor (+z of the camera is −z of the world).
+/// A 64 × 64 camera 1 m above (0.25, 0.25) looking down at the floor (its +z is the world's −z).
+fn looking_down() -> Camera {
     let pose = Pose::from_parts(
         nalgebra::Translation3::new(0.25, 0.25, 1.0),
         nalgebra::UnitQuaternion::from_axis_angle(
@@ -100,24 +98,34 @@ fn relabel_strip_and_cup(scope: RelabelScope) -> (usize, Vec<u32>, [Option<u32>;
             std::f64::consts::PI,
         ),
     );
-    let camera = Camera::from_pose(Intrinsics::new(64.0, 64.0, 32.0, 32.0, 64, 64), &pose, 0.05);
-    m.render_for_consensus(7, &camera, 50);
-    let labels = vec![0u32; 64 * 64];
+    Camera::from_pose(Intrinsics::new(64.0, 64.0, 32.0, 32.0, 64, 64), &pose, 0.05)
+}
+
+/// Renders `m`'s map for keyframe 7 from [`looking_down`] and applies a consensus with the
+/// consistent label map `labels` that moves labels 2 and 3 to 1 with `scope`.
+fn labels_2_and_3_to_1(m: &mut Mapper, labels: &[u32], scope: RelabelScope) -> ConsensusApplied {
+    m.render_for_consensus(7, &looking_down(), 50);
     let relabels = [2, 3].map(|from| RelabelInstruction {
         from,
         to: 1,
         pixels: Vec::new(),
         scope,
     });
-    let done = m
-        .apply_consensus(&ConsensusUpdate {
-            seq: 7,
-            consistent_label_map: &labels,
-            relabels: &relabels,
-            counter_regions: &[],
-            counter_prune_scale: 0.1,
-        })
-        .expect("valid update");
+    m.apply_consensus(&ConsensusUpdate {
+        seq: 7,
+        consistent_label_map: labels,
+        relabels: &relabels,
+        counter_regions: &[],
+        counter_prune_scale: 0.1,
+    })
+    .expect("valid update")
+}
+
+/// The floor strip (2) and the cup (3) relabelled to the floor (1) with `scope`, seen by a
+/// camera 1 m above the floor: how many moved, which were kept back, the labels' sizes after.
+fn relabel_strip_and_cup(scope: RelabelScope) -> (usize, Vec<u32>, [Option<u32>; 3]) {
+    let mut m = Mapper::with_map(MapperConfig::default(), floor_strip_and_cup());
+    let done = labels_2_and_3_to_1(&mut m, &vec![0u32; 64 * 64], scope);
     let counts = m.map().count_per_label();
     let count = |l: u32| counts.get(&l).copied();
     (
@@ -141,4 +149,35 @@ fn a_whole_merge_moves_a_label_standing_off_the_surface_too() {
     let (relabelled, kept, counts) = relabel_strip_and_cup(RelabelScope::Merged);
     assert_eq!((relabelled, kept), (12, vec![]));
     assert_eq!(counts, [Some(112), None, None]);
+}
+
+#[test]
+fn a_split_off_piece_of_the_floor_rejoins_it_and_a_cup_keeps_its_fresh_label() {
+    // The strip and the cup unlabelled (the map left them so); the consensus split both off
+    // the floor (1) with fresh labels 2 and 3 and asks them to rejoin it.
+    let mut map = floor_strip_and_cup();
+    for l in map.labels.iter_mut().filter(|l| **l != 1) {
+        *l = 0;
+    }
+    let mut m = Mapper::with_map(MapperConfig::default(), map);
+    // The consistent label map: 2 at the strip's pixels (world x = 0.5, u = 48), 3 around the
+    // cup's (world (0.2, 0.2): u ≈ 28, v ≈ 36), the floor's label elsewhere.
+    let labels: Vec<u32> = (0..64 * 64)
+        .map(|p| match (p % 64, p / 64) {
+            (u, _) if u >= 46 => 2,
+            (24..=32, 32..=40) => 3,
+            _ => 1,
+        })
+        .collect();
+    let done = labels_2_and_3_to_1(&mut m, &labels, RelabelScope::Rejoin);
+    // All twelve took their pixel's label; the strip (4 mm off the floor) went back whole, the
+    // cup (median 8 cm off) kept its own.
+    assert_eq!(done.labelled, 12);
+    assert_eq!(done.rejoined, vec![2]);
+    assert_eq!(done.relabelled, 0);
+    let counts = m.map().count_per_label();
+    assert_eq!(
+        [1, 2, 3].map(|l| counts.get(&l).copied()),
+        [Some(106), None, Some(6)]
+    );
 }

@@ -539,6 +539,7 @@ impl WireResult {
                         RelabelScope::Pixels => PixelRun::SCOPE_PIXELS,
                         RelabelScope::Label => PixelRun::SCOPE_LABEL,
                         RelabelScope::Merged => PixelRun::SCOPE_MERGED,
+                        RelabelScope::Rejoin => PixelRun::SCOPE_REJOIN,
                     },
                 }
             })

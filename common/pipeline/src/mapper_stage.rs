@@ -564,10 +564,11 @@ impl MapperStage {
                 from: r.from,
                 to: r.to,
                 pixels: pixels(r.offset, r.count),
-                // decode checked the scope is one of the three
+                // decode checked the scope is one of the four
                 scope: match r.scope {
                     PixelRun::SCOPE_LABEL => RelabelScope::Label,
                     PixelRun::SCOPE_MERGED => RelabelScope::Merged,
+                    PixelRun::SCOPE_REJOIN => RelabelScope::Rejoin,
                     _ => RelabelScope::Pixels,
                 },
             })
@@ -597,6 +598,13 @@ impl MapperStage {
                     done.labelled,
                     done.pruned
                 );
+                if !done.rejoined.is_empty() {
+                    tracing::info!(
+                        "consensus #{seq}: labels {:?} went back to the label they were split \
+                         off: they lie on its surface",
+                        done.rejoined
+                    );
+                }
                 if !done.kept_off_host.is_empty() {
                     tracing::info!(
                         "consensus #{seq}: labels {:?} not absorbed: they stand off the surface \

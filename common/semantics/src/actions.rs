@@ -215,6 +215,16 @@ impl Decisions {
                                 scope: RelabelScope::Pixels,
                             });
                         }
+                        // A piece of ℓr's own surface the map left unlabelled goes back to
+                        // it: only the map's 3D surfaces tell it from an object beside ℓr.
+                        if e.matching.split_off.contains(&s) {
+                            d.relabels.push(RelabelInstruction {
+                                from: t,
+                                to: r,
+                                pixels: Vec::new(),
+                                scope: RelabelScope::Rejoin,
+                            });
+                        }
                         t
                     }
                     Err(_) => {

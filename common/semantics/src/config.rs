@@ -73,7 +73,9 @@ pub struct ConsensusConfig {
     /// other segments of the view hold, each of which it covers under τ3, is Inside: an
     /// object beside a held surface that the map left unlabelled. Off, such an object (a box
     /// on a table, once sent to "other") stays unlabelled for good: too few of its pixels
-    /// are mapped for Inside's τ2, and the table's fringe on it is over τ3 for New.
+    /// are mapped for Inside's τ2, and the table's fringe on it is over τ3 for New. Its
+    /// fresh label goes back to the held label where the mapper finds it on that label's
+    /// surface ([`crate::RelabelScope::Rejoin`]): a piece of floor, not a box on a table.
     pub split_unlabelled_objects: bool,
 }
 

@@ -18,6 +18,9 @@ pub struct Matching {
     pub inside: BTreeMap<u32, u32>,
     /// ℓs → the other held labels it lies over (ascending), relabelled with ℓr.
     pub inside_also: BTreeMap<u32, Vec<u32>>,
+    /// The Inside input labels that lie mostly over unlabelled Gaussians (the unlabelled-object
+    /// split): their fresh label rejoins ℓr where it lies on ℓr's surface.
+    pub split_off: BTreeSet<u32>,
     /// ℓr → its Partial parts ℓs (sorted).
     pub partial: BTreeMap<u32, Vec<u32>>,
     /// ℓs → its rendered Whole parts ℓr (sorted).
@@ -147,6 +150,7 @@ impl Matching {
                 {
                     let held: Vec<(u32, u32)> = partners(s).map(|(r, i, ..)| (r, i)).collect();
                     if m.insert_inside(s, &held) {
+                        m.split_off.insert(s);
                         continue;
                     }
                 }

@@ -50,6 +50,10 @@ pub enum RelabelScope {
     /// Every one in the map, wherever it lies: a Whole merge of a label mostly in view
     /// (§5.5), whose parts need not share a surface (a chair's seat and back).
     Merged,
+    /// Every one in the map, after the consistent label map labelled the unlabelled ones: a
+    /// fresh label just split off `to` (the unlabelled-object split, §5.5) goes back where it
+    /// lies on the surface of `to`. The mapper applies it; [`crate::apply_relabels`] skips it.
+    Rejoin,
 }
 
 /// Symmetric difference of a Full match's masks: look for Gaussians labelled `label` there (§5.3).
@@ -105,6 +109,7 @@ impl ConsensusOutput {
             }
             RelabelScope::Label => format!("absorb {} → {} (whole label)", r.from, r.to),
             RelabelScope::Merged => format!("merge {} → {} (whole label)", r.from, r.to),
+            RelabelScope::Rejoin => format!("rejoin {} → {} if on its surface", r.from, r.to),
         }));
         parts.join("; ")
     }

@@ -75,7 +75,8 @@ pub(crate) fn tile_rows(top_k: &TopK, pixels: &[u32]) -> Result<Vec<(u32, u32, u
 
 /// Applies relabel instructions in order: in each listed pixel's top-K (or, for
 /// [`RelabelScope::Label`] and [`RelabelScope::Merged`], anywhere in the map) a Gaussian
-/// labelled `from` gets `to`.
+/// labelled `from` gets `to`. [`RelabelScope::Rejoin`] is skipped: it needs the map's surfaces
+/// after labelling, which the mapper has.
 /// Validates everything first, so on error no label changed.
 /// Returns how many label writes happened.
 pub fn apply_relabels(
@@ -103,7 +104,7 @@ pub fn apply_relabels_centred(
     let mut changed = 0;
     let mut in_region = vec![false; top_k.pixel_count()];
     for instruction in relabels {
-        if instruction.from == instruction.to {
+        if instruction.from == instruction.to || instruction.scope == RelabelScope::Rejoin {
             continue;
         }
         if matches!(

@@ -3,7 +3,9 @@
 mod common;
 
 use common::{consensus_with, Scene};
-use opengs_semantics::{pair_relation, ConsensusConfig, LabelTarget, PairRelation, Relation};
+use opengs_semantics::{
+    pair_relation, ConsensusConfig, LabelTarget, PairRelation, RelabelScope, Relation,
+};
 
 /// One input label (1) and one rendered label (1) laid out on a line:
 /// `s_only` input-only pixels, then `shared`, then `r_only` rendered-only pixels.
@@ -282,13 +284,21 @@ fn an_object_left_unlabelled_beside_held_labels_takes_a_fresh_label() {
         .iter()
         .all(|&p| out.consistent_label_map[p] == fresh));
     // Over the box's 100 pixels the Gaussians of both table labels (the fringe) move to the
-    // box's label; nothing else moves.
-    let moved: Vec<(u32, u32, usize)> = out
+    // box's label, and the box's label goes back to the table label it shares most with (a
+    // tie: the smaller, 1) wherever the mapper finds it on that label's surface.
+    let moved: Vec<(u32, u32, usize, RelabelScope)> = out
         .relabels
         .iter()
-        .map(|r| (r.from, r.to, r.pixels.len()))
+        .map(|r| (r.from, r.to, r.pixels.len(), r.scope))
         .collect();
-    assert_eq!(moved, vec![(1, fresh, 100), (3, fresh, 100)]);
+    assert_eq!(
+        moved,
+        vec![
+            (1, fresh, 100, RelabelScope::Pixels),
+            (3, fresh, 100, RelabelScope::Pixels),
+            (fresh, 1, 0, RelabelScope::Rejoin)
+        ]
+    );
     assert_eq!(
         (of(1).relation, of(3).relation),
         (Relation::Full, Relation::Full)
