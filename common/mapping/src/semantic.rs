@@ -22,7 +22,7 @@ use opengs_semantics::{
 };
 use opengs_splat::{render_into, Adam, Camera, GaussianMap, RenderRequest, Rendered, TopK};
 
-use crate::fragment::{lies_on_host, median_offset_from_host, FRAGMENT_MAX_OFFSET_M};
+use crate::fragment::lies_on_host;
 
 /// Renders kept at most while their consensus is outstanding (the segmenter works on the
 /// newest keyframe only, so more would be stale).
@@ -300,16 +300,21 @@ impl SemanticLoop {
 /// Returns the labels that went back.
 fn rejoin_on_host(map: &mut GaussianMap, relabels: &[RelabelInstruction]) -> Vec<u32> {
     let mut rejoined = Vec::new();
-    for r in relabels.iter().filter(|r| r.scope == RelabelScope::Rejoin) {
-        let on_host = median_offset_from_host(map, r.from, r.to)
-            .is_some_and(|offset| offset <= FRAGMENT_MAX_OFFSET_M);
-        if r.from == r.to || !on_host {
+    for r in relabels
+        .iter()
+        .filter(|r| r.scope == RelabelScope::Rejoin && r.from != r.to)
+    {
+        if !lies_on_host(map, r.from, r.to) {
             continue;
         }
+        let mut moved = false;
         for label in map.labels.iter_mut().filter(|l| **l == r.from) {
             *label = r.to;
+            moved = true;
         }
-        rejoined.push(r.from);
+        if moved {
+            rejoined.push(r.from);
+        }
     }
     rejoined
 }
