@@ -109,6 +109,27 @@ pub fn segment_confidence(
         .collect()
 }
 
+/// Per segment, the depth (m) that `quantile` of its pixels with depth lie nearer than
+/// (0 for a segment without depth): how near the camera saw the object.
+pub fn near_depth(segments: &[u32], depth_m: &[f32], count: usize, quantile: f32) -> Vec<f32> {
+    let mut depths: Vec<Vec<f32>> = vec![Vec::new(); count];
+    for (&s, &z) in segments.iter().zip(depth_m) {
+        if (s as usize) < count && z > 0.0 && z.is_finite() {
+            depths[s as usize].push(z);
+        }
+    }
+    depths
+        .iter_mut()
+        .map(|d| {
+            if d.is_empty() {
+                return 0.0;
+            }
+            let k = ((d.len() - 1) as f32 * quantile.clamp(0.0, 1.0)) as usize;
+            *d.select_nth_unstable_by(k, f32::total_cmp).1
+        })
+        .collect()
+}
+
 /// Segment per coarse pixel; each 4-connected hole (no depth) bordered by
 /// one segment only takes it, other holes stay `NO_SEGMENT`.
 pub fn paint_and_fill_holes(patch_of: &[u32], segment_of_patch: &[u32], width: usize) -> Vec<u32> {
@@ -203,6 +224,18 @@ mod tests {
         assert_ne!(seg[0], seg[2]);
         let conf = segment_confidence(&edges, &verdicts, &seg, count);
         assert!(conf.iter().all(|&c| c > 0.9), "{conf:?}");
+    }
+
+    #[test]
+    fn near_depth_is_the_quantile_of_each_segments_depths() {
+        // Segment 0: 1..=10 m; segment 1: 2 m and one pixel without depth; segment 2: no pixel.
+        let mut segments = vec![0u32; 10];
+        let mut depth: Vec<f32> = (1..=10).map(|z| z as f32).collect();
+        segments.extend([1, 1, NO_SEGMENT]);
+        depth.extend([2.0, 0.0, 7.0]);
+        let near = near_depth(&segments, &depth, 3, 0.1);
+        assert_eq!(near, vec![1.0, 2.0, 0.0]);
+        assert_eq!(near_depth(&segments, &depth, 3, 0.5)[0], 5.0);
     }
 
     #[test]

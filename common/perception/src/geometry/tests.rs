@@ -439,6 +439,52 @@ fn labels_table_and_confidence_are_consistent() {
 }
 
 #[test]
+fn a_box_seen_from_afar_is_trusted_less_by_the_square_of_its_distance() {
+    let box_confidence = |r: &Rendered, confident_depth: f32| {
+        let seg = segment_with(
+            r,
+            GeometryParams {
+                confident_depth,
+                ..GeometryParams::default()
+            },
+        );
+        let (label, _, _) = dominant(&seg, r, 1);
+        seg.info(label).map(|s| s.confidence).expect("box labelled")
+    };
+    // The depth (m) a tenth of the box's pixels lie nearer than.
+    let near_tenth = |r: &Rendered| {
+        let mut z: Vec<f32> = (r.object.iter().zip(&r.depth))
+            .filter(|&(&o, &d)| o == 1 && d > 0)
+            .map(|(_, &d)| d as f32 / DEPTH_SCALE)
+            .collect();
+        z.sort_by(f32::total_cmp);
+        z[z.len() / 10]
+    };
+    let near = box_on_floor().render();
+    let z_near = near_tenth(&near);
+    // Nearer than the confident depth: the confidence is left alone.
+    assert_eq!(
+        box_confidence(&near, z_near + 0.5),
+        box_confidence(&near, 0.0)
+    );
+    // The same box 1.8 m further and twice its size (as many pixels): (1.5 / z)².
+    let far = desk_view(vec![
+        floor(Paint::Plain(GREY)),
+        cuboid([-0.4, 0.0, 3.0], [0.4, 0.5, 3.6], GREY),
+    ])
+    .render();
+    let z_far = near_tenth(&far);
+    let (with, without) = (box_confidence(&far, 1.5), box_confidence(&far, 0.0));
+    let expected = (1.5 / z_far).powi(2);
+    assert!(z_far > 2.5 && without > 0.7, "{z_far} {without}");
+    assert!(
+        (with / without / expected - 1.0).abs() < 0.1,
+        "kept {:.3} of {without:.3}, expected {expected:.3} at {z_far:.2} m",
+        with / without
+    );
+}
+
+#[test]
 fn bad_sizes_and_parameters_are_errors() {
     let r = box_on_floor().render();
     let input = SegmenterInput {
