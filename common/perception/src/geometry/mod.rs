@@ -368,9 +368,7 @@ impl GeometrySegmenter {
         let inherited: Vec<f32> = parents.iter().map(|&s| confidence[s as usize]).collect();
         confidence.extend(inherited);
         if p.confident_depth > 0.0 {
-            // Depth noise grows as z² (Kinect-like sensors), so a step or crease that
-            // would part an object is hidden a little more with every metre: a
-            // segment seen only from afar vouches less for having no boundary inside.
+            // Depth noise grows as z²: a far segment vouches less for having no boundary inside.
             let near =
                 regions::near_depth(&segments, &coarse.depth_m, confidence.len(), NEAR_QUANTILE);
             for (c, z) in confidence.iter_mut().zip(near) {
