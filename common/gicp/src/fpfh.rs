@@ -51,7 +51,7 @@ pub fn oriented_normals(
 /// The unit eigenvector of `c`'s smallest eigenvalue λ, as the largest cross product of
 /// two rows of `c − λI` (both rows are orthogonal to it). nalgebra's eigenvectors can be
 /// wrong where two eigenvalues coincide (a flat disc `I − nnᵀ` gave one lying in the disc).
-fn least_spread_direction(c: &Matrix3<f64>) -> Vector3<f64> {
+pub fn least_spread_direction(c: &Matrix3<f64>) -> Vector3<f64> {
     let eig = SymmetricEigen::new(*c);
     let m = c - Matrix3::identity() * eig.eigenvalues.min();
     let (r0, r1, r2) = (

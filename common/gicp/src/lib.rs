@@ -53,7 +53,7 @@ pub use covariance::{
     covariance_from_gaussian, estimate_covariances, regularize, Regularization, DEFAULT_NEIGHBOURS,
 };
 pub use error::GicpError;
-pub use fpfh::{fpfh, oriented_normals, Fpfh, FPFH_LEN};
+pub use fpfh::{fpfh, least_spread_direction, oriented_normals, Fpfh, FPFH_LEN};
 pub use global::{register_global, FeatureCloud, GlobalConfig, GlobalMatch};
 pub use grid_covariance::estimate_covariances_on_grid;
 pub use kdtree::PointTree;

@@ -4,13 +4,14 @@
 //! so the tracker and the relocalisation thread ([`crate::relocalise_worker`]) run the
 //! same code.
 
-use opengs_geometry::nalgebra::Point3;
+use opengs_geometry::nalgebra::{Point3, Translation3, UnitQuaternion};
 use opengs_geometry::Pose;
 use opengs_gicp::{
     coarse_estimate, register_coarse_to_fine, register_global, Cloud, CoarseToFine, FeatureCloud,
     Registration, RegistrationConfig,
 };
 
+use crate::ambiguity::{choose, surface_fitness, weak_translations, Scored};
 use crate::model::TrackingModel;
 use crate::motion::MAX_EXTRAPOLATION_S;
 use crate::verify::{verify, verify_visibility, MotionPrior, Rejection, VerifyConfig};
@@ -154,7 +155,7 @@ pub(crate) fn try_guesses(
             last_failure = "the coarse alignment sees through the model".into();
             continue;
         };
-        match register_verified(
+        let found = register_verified(
             model,
             config,
             frame,
@@ -162,7 +163,14 @@ pub(crate) fn try_guesses(
             &start,
             Attempt::Relocalise,
             None,
-        ) {
+        );
+        // The spell's first attempt (the last verified pose, most often one frame after a
+        // gap) is taken as it is; later ones may have landed anywhere.
+        let found = match (found, viewpoints.is_some()) {
+            (Ok(r), true) => settle(model, config, frame, cloud, r, Attempt::Relocalise),
+            (found, _) => found,
+        };
+        match found {
             Ok(r) => return Ok(r),
             Err(why) => last_failure = why,
         }
@@ -208,12 +216,120 @@ fn try_global(
             }
         }
     }
-    best.ok_or(last_failure)
+    match best {
+        Some(r) => settle(model, config, frame, cloud, r, Attempt::Global),
+        None => Err(last_failure),
+    }
+}
+
+/// A relocalised pose settled ([`crate::ambiguity`]): fine restarts a step either way
+/// along its two weakest translations, every verified result scored by the share of the
+/// frame lying on the model's surfaces; the best, or `Err` when the view does not choose.
+fn settle(
+    model: &TrackingModel,
+    config: &TrackerConfig,
+    frame: &DepthFrame,
+    cloud: &Cloud,
+    found: Registration,
+    kind: Attempt,
+) -> Verified {
+    let settling = &config.relocalise.settle;
+    if settling.step <= 0.0 {
+        return Ok(found);
+    }
+    let target = model.target().fine();
+    let reach = config.registration.max_correspondence_distance;
+    let score = |pose: &Pose| surface_fitness(target, cloud, pose, reach, settling.tolerance);
+    let mut results = vec![found];
+    for direction in weak_translations(&results[0].hessian) {
+        for sign in [1.0, -1.0] {
+            let shift = Translation3::from(direction * (sign * settling.step));
+            let start = Pose::from_parts(shift, UnitQuaternion::identity()) * results[0].transform;
+            if let Ok(r) = register_verified(model, config, frame, cloud, &start, kind, None) {
+                results.push(r);
+            }
+        }
+    }
+    let scored: Vec<Scored> = results
+        .iter()
+        .map(|r| Scored {
+            pose: r.transform,
+            score: score(&r.transform),
+        })
+        .collect();
+    match choose(&scored, settling) {
+        Some(Ok(best)) => Ok(results.swap_remove(best)),
+        Some(Err(why)) => Err(why),
+        None => Err("no result to settle".into()),
+    }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::model::ModelBuilder;
+    use opengs_gicp::synthetic::{tum_camera, RoomScene, DEPTH_UNITS_PER_METRE};
+    use opengs_gicp::Regularization;
+    use opengs_gicp::{estimate_covariances_on_grid, regularize, sample_depth_grid};
+
+    /// The view from the origin (looking along +z, y down) of `scene`: the frame's depth,
+    /// its cloud, and a model made of that same cloud.
+    fn view(scene: &RoomScene) -> (Vec<u16>, Cloud, TrackingModel) {
+        let c = TrackerConfig::tum();
+        let k = tum_camera();
+        let depth = scene.render_depth(&k, &Pose::identity(), DEPTH_UNITS_PER_METRE);
+        let samples =
+            sample_depth_grid(&depth, DEPTH_UNITS_PER_METRE, &k, c.stride, c.max_depth).unwrap();
+        let raw =
+            estimate_covariances_on_grid(&samples, c.neighbours, Regularization::None).unwrap();
+        let cloud = Cloud {
+            covariances: raw
+                .iter()
+                .map(|m| regularize(m, c.regularization))
+                .collect(),
+            points: samples.points,
+        };
+        let mut builder = ModelBuilder::inline(c.coarse_to_fine.coarse_voxel);
+        builder.add_keyframe(0, cloud.clone());
+        let model = builder.finished().pop().unwrap().unwrap();
+        (depth, cloud, model)
+    }
+
+    /// Registration from 2 cm along x off the truth, then settled.
+    fn settled_from_aside(scene: &RoomScene) -> Verified {
+        let c = TrackerConfig::tum();
+        let k = tum_camera();
+        let (depth, cloud, model) = view(scene);
+        let frame = DepthFrame {
+            depth: &depth,
+            depth_scale: DEPTH_UNITS_PER_METRE,
+            intrinsics: &k,
+            timestamp: 0.0,
+        };
+        let aside = Pose::from_parts(
+            Translation3::new(0.02, 0.0, 0.0),
+            UnitQuaternion::identity(),
+        );
+        let found = register_verified(&model, &c, &frame, &cloud, &aside, Attempt::Global, None)?;
+        settle(&model, &c, &frame, &cloud, found, Attempt::Global)
+    }
+
+    #[test]
+    fn a_pose_the_view_leaves_free_to_slide_is_refused_a_fixed_one_settles() {
+        // A room 100 m wide: the back wall, floor and ceiling leave x free.
+        let hall = RoomScene {
+            room_min: [-50.0, -1.3, -1.0].into(),
+            room_max: [50.0, 1.2, 4.0].into(),
+            cuboids: Vec::new(),
+            spheres: Vec::new(),
+        };
+        let why = settled_from_aside(&hall).unwrap_err();
+        assert!(why.contains("does not fix the pose"), "{why}");
+        // The furnished room: the restarts come back, the truth is found.
+        let r = settled_from_aside(&RoomScene::default()).unwrap();
+        let off = r.transform.translation.vector.norm();
+        assert!(off < 0.002, "{:.2} cm off", off * 100.0);
+    }
 
     #[test]
     fn a_frame_beyond_the_motion_horizon_is_checked_as_a_relocalisation() {

@@ -26,13 +26,14 @@
 
 use std::sync::Arc;
 
-use opengs_geometry::nalgebra::{Matrix3, Matrix6, Point3, Translation3, UnitQuaternion, Vector3};
+use opengs_geometry::nalgebra::{Matrix3, Point3, Translation3, UnitQuaternion};
 use opengs_geometry::{Intrinsics, Pose};
 use opengs_gicp::{
     estimate_covariances_on_grid, regularize, sample_depth_grid, Cloud, GicpError, NeighbourGrid,
     Registration, Regularization,
 };
 
+use crate::ambiguity::weak_translations;
 use crate::attempt::{register_verified, try_guesses, Attempt, Verified};
 use crate::model::{MapGaussians, ModelBuilder, ModelUpdate, TrackingModel};
 use crate::relocalise_worker::{GuessJob, RelocaliseWorker};
@@ -999,32 +1000,10 @@ impl FrameTracker {
     }
 }
 
-/// The two least constrained translation directions (unit, map frame) of a registration's
-/// `H`: eigenvectors of the translation block's Schur complement (what the correspondences
-/// say about translation with the rotation left free), smallest eigenvalue first. A wide
-/// search's wrong minimum lies a few centimetres along them (a slide along a wall or a
-/// table top), not along the well pinned one.
-fn weak_translations(h: &Matrix6<f64>) -> [Vector3<f64>; 2] {
-    let rr = h.fixed_view::<3, 3>(0, 0).into_owned();
-    let rt = h.fixed_view::<3, 3>(0, 3).into_owned();
-    let tt = h.fixed_view::<3, 3>(3, 3).into_owned();
-    let schur = match rr.try_inverse() {
-        Some(inv) => tt - rt.transpose() * inv * rt,
-        None => tt,
-    };
-    let eigen = schur.symmetric_eigen();
-    let mut order = [0usize, 1, 2];
-    order.sort_by(|&a, &b| eigen.eigenvalues[a].total_cmp(&eigen.eigenvalues[b]));
-    [order[0], order[1]].map(|i| eigen.eigenvectors.column(i).into_owned())
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    fn diagonal(values: [f64; 6]) -> Matrix6<f64> {
-        Matrix6::from_diagonal(&values.into())
-    }
+    use opengs_geometry::nalgebra::Vector3;
 
     #[test]
     fn a_fine_answer_that_turned_or_slid_is_not_taken_as_it_is() {
@@ -1065,20 +1044,5 @@ mod tests {
         // Before any model, the pending keyframe alone: -0.025 to 0.515, 55 points.
         let share = overlap_with_pending(&frame, None, &pending, r * r);
         assert!((share - 0.275).abs() < 1e-9, "{share}");
-    }
-
-    #[test]
-    fn weak_translations_are_the_least_informed_with_the_rotation_free() {
-        // Stiff rotation; translation information 50 along x, 1 along y, 20 along z.
-        let [a, b] = weak_translations(&diagonal([100.0, 100.0, 100.0, 50.0, 1.0, 20.0]));
-        assert!(a.y.abs() > 0.999 && b.z.abs() > 0.999, "{a} {b}");
-        // A turn about z that moves points like a shift along x (a lever arm): x looks stiff
-        // in the translation block (50) but, with the turn free, keeps 50 − 69²/100 = 2.4,
-        // below y's 10.
-        let mut h = diagonal([100.0, 100.0, 100.0, 50.0, 10.0, 20.0]);
-        h[(2, 3)] = 69.0;
-        h[(3, 2)] = 69.0;
-        let [a, b] = weak_translations(&h);
-        assert!(a.x.abs() > 0.999 && b.y.abs() > 0.999, "{a} {b}");
     }
 }

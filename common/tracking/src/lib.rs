@@ -5,6 +5,7 @@
 //! several guesses and global registration until a result verifies again, the
 //! keyframe rule, and a model built off the tracking path.
 
+mod ambiguity;
 mod attempt;
 mod config;
 mod depth_weight;
@@ -17,6 +18,7 @@ mod relocalise_worker;
 mod verify;
 mod visibility;
 
+pub use ambiguity::{surface_fitness, weak_translations, SettleConfig};
 pub use config::TrackerConfig;
 pub use depth_weight::depth_scale;
 pub use frame_tracker::{

@@ -16,7 +16,7 @@ use opengs_geometry::nalgebra::{Point3, Translation3, UnitQuaternion, Vector3};
 use opengs_geometry::Pose;
 use opengs_gicp::GlobalConfig;
 
-use crate::VerifyConfig;
+use crate::{SettleConfig, VerifyConfig};
 
 /// Relocalisation settings.
 #[derive(Debug, Clone, PartialEq)]
@@ -39,6 +39,9 @@ pub struct RelocaliseConfig {
     /// Global registration against the model, and the verification of a pose it proposed.
     pub global: GlobalConfig,
     pub global_verify: VerifyConfig,
+    /// How a pose relocalised after the spell's first attempt is settled, and refused when
+    /// the view does not determine it ([`crate::ambiguity`]).
+    pub settle: SettleConfig,
 }
 
 impl Default for RelocaliseConfig {
@@ -68,6 +71,7 @@ impl Default for RelocaliseConfig {
                 max_violation: 0.05,
                 ..VerifyConfig::default()
             },
+            settle: SettleConfig::default(),
         }
     }
 }
