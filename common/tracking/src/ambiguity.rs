@@ -38,9 +38,9 @@ pub struct SettleConfig {
 
 impl Default for SettleConfig {
     fn default() -> Self {
-        // Scene 1 after its teleport: undetermined poses within 0.003–0.008 of each other;
-        // scene 5's true pose 0.018–0.05 over every restart 1.1–6.5 cm away (tracker alone,
-        // frames 671–881; `examples/ambiguity_probe`).
+        // Scene 1 after its teleport: undetermined poses within 0.003–0.008 of each other
+        // (frames 701, 731); scene 5's true pose 0.018 or more over every restart 1.1 cm or
+        // more away (frames 671–791; tracker alone, `examples/ambiguity_probe`).
         Self {
             step: 0.03,
             tolerance: 0.005,

@@ -140,7 +140,8 @@ fn screen_guess(
 /// Relocalisation guesses, each screened, then registered and verified without a motion
 /// prior: the first that verifies; failing that, with `viewpoints` (where the keyframes
 /// were taken), the hypotheses of global registration ([`try_global`]); or why the last
-/// one failed.
+/// one failed. With `viewpoints` (from a spell's second attempt on) an answer is settled
+/// ([`settle`]) before it is taken.
 pub(crate) fn try_guesses(
     model: &TrackingModel,
     config: &TrackerConfig,
