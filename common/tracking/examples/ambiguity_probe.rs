@@ -5,16 +5,14 @@
 //! then the global registration's pick. The figures behind `SettleConfig`'s defaults.
 //! `ambiguity_probe DATASET TELEPORT_FRAME [every] [until]`
 use opengs_datasets::{open_dataset, DatasetSpec};
-use opengs_geometry::nalgebra::{Point3, Translation3, UnitQuaternion};
+use opengs_geometry::nalgebra::Point3;
 use opengs_geometry::Pose;
 use opengs_gicp::{
-    coarse_estimate, estimate_covariances_on_grid, register_coarse_to_fine, register_global,
-    regularize, sample_depth_grid, Cloud, CoarseToFine, FeatureCloud, GlobalConfig, PointTree,
-    Registration, Regularization,
+    coarse_estimate, register_coarse_to_fine, register_global, CoarseToFine, FeatureCloud,
+    GlobalConfig, PointTree, Registration,
 };
 use opengs_tracking::{
-    check_visibility, depth_scale, surface_fitness, weak_translations, DepthFrame, FrameTracker,
-    TrackerConfig,
+    check_visibility, restarts, surface_fitness, DepthFrame, FrameTracker, TrackerConfig,
 };
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
@@ -65,25 +63,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             intrinsics: &k,
             timestamp: f.timestamp,
         };
-        let samples = sample_depth_grid(
-            &f.depth,
-            f.depth_scale as f64,
-            &k,
-            cfg.stride,
-            cfg.max_depth,
-        )?;
-        if samples.points.len() < cfg.min_points {
+        // The tracker's own source cloud (`Err`: too few samples).
+        let Ok((cloud, _)) = tracker.source_cloud(&frame) else {
             continue;
-        }
-        let raw = estimate_covariances_on_grid(&samples, cfg.neighbours, Regularization::None)?;
-        let (from, until) = (cfg.depth_weight_from, cfg.depth_weight_until);
-        let cloud = Cloud {
-            covariances: raw
-                .iter()
-                .zip(&samples.points)
-                .map(|(c, p)| regularize(c, cfg.regularization) * depth_scale(p.z, from, until))
-                .collect(),
-            points: samples.points,
         };
         let truth = align.inverse() * f.gt_pose.ok_or("ground truth")?;
         let fine = |start: &Pose| {
@@ -113,13 +95,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             )
         };
         let restarts = |r: &Registration| {
-            for d in weak_translations(&r.hessian) {
-                for s in [1.0, -1.0] {
-                    let shift = Translation3::from(d * (s * settle.step));
-                    let start = Pose::from_parts(shift, UnitQuaternion::identity()) * r.transform;
-                    if let Ok(q) = fine(&start) {
-                        line("restart", &q);
-                    }
+            for start in restarts(&r.transform, &r.hessian, settle.step) {
+                if let Ok(q) = fine(&start) {
+                    line("restart", &q);
                 }
             }
         };

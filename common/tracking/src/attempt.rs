@@ -4,14 +4,14 @@
 //! so the tracker and the relocalisation thread ([`crate::relocalise_worker`]) run the
 //! same code.
 
-use opengs_geometry::nalgebra::{Point3, Translation3, UnitQuaternion};
+use opengs_geometry::nalgebra::Point3;
 use opengs_geometry::Pose;
 use opengs_gicp::{
     coarse_estimate, register_coarse_to_fine, register_global, Cloud, CoarseToFine, FeatureCloud,
     Registration, RegistrationConfig,
 };
 
-use crate::ambiguity::{choose, surface_fitness, weak_translations, Scored};
+use crate::ambiguity::{choose, restarts, surface_fitness, Scored};
 use crate::model::TrackingModel;
 use crate::motion::MAX_EXTRAPOLATION_S;
 use crate::verify::{verify, verify_visibility, MotionPrior, Rejection, VerifyConfig};
@@ -241,14 +241,11 @@ fn settle(
     let target = model.target().fine();
     let reach = config.registration.max_correspondence_distance;
     let score = |pose: &Pose| surface_fitness(target, cloud, pose, reach, settling.tolerance);
+    let starts = restarts(&found.transform, &found.hessian, settling.step);
     let mut results = vec![found];
-    for direction in weak_translations(&results[0].hessian) {
-        for sign in [1.0, -1.0] {
-            let shift = Translation3::from(direction * (sign * settling.step));
-            let start = Pose::from_parts(shift, UnitQuaternion::identity()) * results[0].transform;
-            if let Ok(r) = register_verified(model, config, frame, cloud, &start, kind, None) {
-                results.push(r);
-            }
+    for start in starts {
+        if let Ok(r) = register_verified(model, config, frame, cloud, &start, kind, None) {
+            results.push(r);
         }
     }
     let scored: Vec<Scored> = results
@@ -269,6 +266,7 @@ fn settle(
 mod tests {
     use super::*;
     use crate::model::ModelBuilder;
+    use opengs_geometry::nalgebra::{Translation3, UnitQuaternion};
     use opengs_gicp::synthetic::{tum_camera, RoomScene, DEPTH_UNITS_PER_METRE};
     use opengs_gicp::Regularization;
     use opengs_gicp::{estimate_covariances_on_grid, regularize, sample_depth_grid};

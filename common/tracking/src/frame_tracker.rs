@@ -26,14 +26,14 @@
 
 use std::sync::Arc;
 
-use opengs_geometry::nalgebra::{Matrix3, Point3, Translation3, UnitQuaternion};
+use opengs_geometry::nalgebra::{Matrix3, Point3};
 use opengs_geometry::{Intrinsics, Pose};
 use opengs_gicp::{
     estimate_covariances_on_grid, regularize, sample_depth_grid, Cloud, GicpError, NeighbourGrid,
     Registration, Regularization,
 };
 
-use crate::ambiguity::weak_translations;
+use crate::ambiguity::restarts;
 use crate::attempt::{register_verified, try_guesses, Attempt, Verified};
 use crate::model::{MapGaussians, ModelBuilder, ModelUpdate, TrackingModel};
 use crate::relocalise_worker::{GuessJob, RelocaliseWorker};
@@ -385,7 +385,10 @@ impl FrameTracker {
 
     /// The frame's samples with covariances regularised for registration, and the raw
     /// covariances a keyframe reshapes (one neighbour search for both).
-    fn source_cloud(&self, frame: &DepthFrame) -> Result<(Cloud, Vec<Matrix3<f64>>), GicpError> {
+    pub fn source_cloud(
+        &self,
+        frame: &DepthFrame,
+    ) -> Result<(Cloud, Vec<Matrix3<f64>>), GicpError> {
         let samples = sample_depth_grid(
             frame.depth,
             frame.depth_scale,
@@ -825,7 +828,7 @@ impl FrameTracker {
 
     /// Restarts of the fine registration a step away from an answer (a wide search's, or a
     /// verified one that slid) either way
-    /// along its two least constrained translations ([`weak_translations`]; the six camera
+    /// along its two least constrained translations ([`restarts`]; the six camera
     /// axis directions found the same answers, 15 ms slower per wide search on fr2_desk with
     /// noise), and one from the answer itself, all with the same `cloud` so that
     /// their fitness compares; the verified restart with the best fitness, if it is not the
@@ -848,18 +851,13 @@ impl FrameTracker {
             .register_verified(frame, cloud, &base, Attempt::Polish, Some(prior))
             .map_or(f64::NEG_INFINITY, |r| r.fitness);
         let mut best: Option<Registration> = None;
-        for direction in weak_translations(&found.hessian) {
-            for sign in [1.0, -1.0] {
-                // A left update moves the camera along `direction` in the map's frame.
-                let shift = Translation3::from(direction * (sign * step));
-                let start = Pose::from_parts(shift, UnitQuaternion::identity()) * base;
-                if let Ok(r) =
-                    self.register_verified(frame, cloud, &start, Attempt::Polish, Some(prior))
-                {
-                    let to_beat = best.as_ref().map_or(own, |b| b.fitness);
-                    if r.fitness > to_beat {
-                        best = Some(r);
-                    }
+        for start in restarts(&base, &found.hessian, step) {
+            if let Ok(r) =
+                self.register_verified(frame, cloud, &start, Attempt::Polish, Some(prior))
+            {
+                let to_beat = best.as_ref().map_or(own, |b| b.fitness);
+                if r.fitness > to_beat {
+                    best = Some(r);
                 }
             }
         }
@@ -1003,7 +1001,7 @@ impl FrameTracker {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use opengs_geometry::nalgebra::Vector3;
+    use opengs_geometry::nalgebra::{Translation3, UnitQuaternion, Vector3};
 
     #[test]
     fn a_fine_answer_that_turned_or_slid_is_not_taken_as_it_is() {

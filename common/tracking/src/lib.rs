@@ -18,7 +18,7 @@ mod relocalise_worker;
 mod verify;
 mod visibility;
 
-pub use ambiguity::{surface_fitness, weak_translations, SettleConfig};
+pub use ambiguity::{restarts, surface_fitness, SettleConfig};
 pub use config::TrackerConfig;
 pub use depth_weight::depth_scale;
 pub use frame_tracker::{
