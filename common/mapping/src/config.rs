@@ -27,11 +27,14 @@ pub struct MapperConfig {
     pub holes: HoleFilling,
     /// Gaussians above this opacity are given to the tracker (0.09 TUM, 0.05 Replica).
     pub trackable_opacity: f32,
-    /// Extent (m) that scales the position learning rate (3DGS: 1.6e-4 × extent). 0.1 m, not
-    /// the room size: the tracker tracks against these means, and Gaussians that move fast
-    /// (~1000 steps in a run with opaque new Gaussians) drag it. Synthetic loop, 600 frames at
-    /// 10 Hz, prior segmenter, ATE / PSNR / mIoU: 1 m 0.83 cm / 23.8 dB / 94.9; 0.5 m 0.52 /
-    /// 24.6 / 95.5; 0.25 m 0.36 / 25.0 / 95.5; 0.1 m 0.20 / 25.2 / 95.1.
+    /// Extent (m) that scales the online position learning rate (3DGS: 1.6e-4 × extent).
+    /// 0: online the means stay where the keyframes' depth put them (the final optimisation
+    /// moves them). The tracker registers against these means; moved by the steps, they drag
+    /// it, its next keyframes land where it went, and the error grows.
+    /// Synthetic loop, 600 frames at 10 Hz, prior segmenter, ATE / PSNR / mIoU: 1 m 0.83 cm /
+    /// 23.8 dB / 94.9; 0.5 m 0.52 / 24.6 / 95.5; 0.25 m 0.36 / 25.0 / 95.5; 0.1 m 0.20 / 25.2 /
+    /// 95.1. Scene 3's fr2_desk teleport row (`opengs bench slam`, 600 final steps): 0.1 m
+    /// drifted 0.5 → 5.9 cm over 25 s of newly mapped space, ATE 2.019 cm; 0 m 0.128 cm.
     pub scene_extent: f32,
     /// Near plane for rendering (m).
     pub near: f32,
@@ -51,7 +54,7 @@ impl Default for MapperConfig {
             holes: HoleFilling::default(),
             loss: LossWeights::default(),
             trackable_opacity: 0.09,
-            scene_extent: 0.1,
+            scene_extent: 0.0,
             near: opengs_splat::DEFAULT_NEAR,
             seed: 0,
         }

@@ -72,6 +72,7 @@ fn keyframes_become_gaussians_and_optimisation_raises_psnr() {
     let kf = first_kf.expect("a keyframe");
     assert!(mapper.keyframes() >= 2, "{} keyframes", mapper.keyframes());
     let before = psnr(&kf, &mapper);
+    let means = mapper.map().means.clone();
     let t = std::time::Instant::now();
     for _ in 0..150 {
         mapper.step();
@@ -80,6 +81,13 @@ fn keyframes_become_gaussians_and_optimisation_raises_psnr() {
     let after = psnr(&kf, &mapper);
     eprintln!("{} Gaussians, {} keyframes: PSNR {before:.2} → {after:.2} dB after 150 steps ({ms:.1} ms/step)", mapper.map().len(), mapper.keyframes());
     assert!(after > before + 3.0, "PSNR {before:.2} → {after:.2}");
+    // Online the means stay where the keyframes' depth put them: the tracker registers
+    // against them (MapperConfig::scene_extent).
+    assert_eq!(mapper.map().len(), means.len(), "no pruning in 150 steps");
+    let moved = (mapper.map().means.iter().zip(&means))
+        .filter(|(a, b)| a != b)
+        .count();
+    assert_eq!(moved, 0, "{moved} of {} means moved online", means.len());
     let trackable = mapper.trackable();
     assert!(!trackable.means.is_empty());
 }
