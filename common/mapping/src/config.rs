@@ -34,7 +34,7 @@ pub struct MapperConfig {
     /// Synthetic loop, 600 frames at 10 Hz, prior segmenter, ATE / PSNR / mIoU: 1 m 0.83 cm /
     /// 23.8 dB / 94.9; 0.5 m 0.52 / 24.6 / 95.5; 0.25 m 0.36 / 25.0 / 95.5; 0.1 m 0.20 / 25.2 /
     /// 95.1. Scene 3's fr2_desk teleport row (`opengs bench slam`, 600 final steps): 0.1 m
-    /// drifted 0.5 → 5.9 cm over 25 s of newly mapped space, ATE 2.019 cm; 0 m 0.128 cm.
+    /// drifted 0.5 → 5.8 cm over 25 s of newly mapped space, ATE 2.019 cm; 0 m 0.128 cm.
     pub scene_extent: f32,
     /// Near plane for rendering (m).
     pub near: f32,
