@@ -128,6 +128,16 @@ pub fn fill_holes(
     added
 }
 
+/// How many final steps `keyframes` kept keyframes get: `min_steps`, or `per_keyframe` for
+/// each keyframe when that is more (0 `min_steps`: none). A fixed count spread over a long
+/// run's keyframes leaves each too few steps to sharpen.
+pub fn final_step_count(min_steps: usize, per_keyframe: usize, keyframes: usize) -> usize {
+    if min_steps == 0 {
+        return 0;
+    }
+    min_steps.max(per_keyframe.saturating_mul(keyframes))
+}
+
 /// Runs `steps` full-resolution steps on the kept keyframes. `progress(done, loss)` is called
 /// after every step; `ControlFlow::Break` (a termination request) stops early, keeping the map as
 /// it is then. Returns `None` when there is nothing to optimise.
@@ -184,6 +194,18 @@ mod tests {
             &vec![1000u16; n],
             1000.0,
         )
+    }
+
+    #[test]
+    fn final_steps_grow_with_the_keyframes_past_the_minimum() {
+        // 600 steps, 4 per keyframe: 150 keyframes is where the count starts to grow.
+        assert_eq!(final_step_count(600, 4, 61), 600);
+        assert_eq!(final_step_count(600, 4, 150), 600);
+        assert_eq!(final_step_count(600, 4, 151), 604);
+        assert_eq!(final_step_count(600, 4, 225), 900);
+        // An explicit count (no per-keyframe share) is kept as given; 0 stays none.
+        assert_eq!(final_step_count(600, 0, 225), 600);
+        assert_eq!(final_step_count(0, 4, 225), 0);
     }
 
     #[test]

@@ -27,7 +27,7 @@ mod target_frame;
 
 pub use config::MapperConfig;
 pub use densify::{gaussians_for_holes, gaussians_from_points, DensifyInput, HoleFilling};
-pub use final_optimisation::{fill_holes, optimise_final, KeptKeyframes};
+pub use final_optimisation::{fill_holes, final_step_count, optimise_final, KeptKeyframes};
 pub use fragment::{
     lies_on_host, median_offset_from_host, FRAGMENT_MAX_OFFSET_M, FRAGMENT_NEIGHBOURS,
 };

@@ -17,8 +17,8 @@ use opengs_ipc_schema::{
     MessageKind, PixelRun, RenderHeader, SegmentsHeader, Stamp,
 };
 use opengs_mapping::{
-    fill_holes, optimise_final, ConsensusUpdate, DensifyInput, KeptKeyframes, Mapper, MapperConfig,
-    StoredKeyframe,
+    fill_holes, final_step_count, optimise_final, ConsensusUpdate, DensifyInput, KeptKeyframes,
+    Mapper, MapperConfig, StoredKeyframe,
 };
 use opengs_runtime::{
     waitset, CallbackProgression, Inlet, Outlet, RunContext, TelemetrySink, WaitSetRunResult,
@@ -41,14 +41,25 @@ pub struct MapperRunFlags {
     /// them stops early and keeps the map as it is.
     #[arg(long, default_value_t = 0)]
     pub finish_steps: usize,
+    /// With `--finish-steps` > 0: at least this many steps per keyframe kept for them, when
+    /// that is more than `--finish-steps` (0: `--finish-steps` exactly).
+    #[arg(long, default_value_t = 0)]
+    pub finish_steps_per_keyframe: usize,
 }
 
 impl MapperRunFlags {
     pub fn to_args(&self) -> Vec<String> {
-        match self.finish_steps {
-            0 => Vec::new(),
-            n => vec!["--finish-steps".into(), n.to_string()],
+        let mut args = Vec::new();
+        if self.finish_steps > 0 {
+            args.extend(["--finish-steps".into(), self.finish_steps.to_string()]);
+            if self.finish_steps_per_keyframe > 0 {
+                args.extend([
+                    "--finish-steps-per-keyframe".into(),
+                    self.finish_steps_per_keyframe.to_string(),
+                ]);
+            }
         }
+        args
     }
 }
 
@@ -1006,7 +1017,11 @@ pub fn run_mapper(ctx: &RunContext, out_dir: &Path, args: &MapperArgs) -> anyhow
     let mut finish_stats = None;
     let mut holes_filled = None;
     if let Some(mut kept) = kept.filter(|_| finishing) {
-        let steps = args.run.finish_steps;
+        let steps = final_step_count(
+            args.run.finish_steps,
+            args.run.finish_steps_per_keyframe,
+            kept.len(),
+        );
         tracing::info!(
             "end of data: final optimisation, {steps} full-resolution steps on {} keyframes",
             kept.len()

@@ -169,7 +169,10 @@ mod tests {
             tracker: TrackerRunFlags {
                 gt_first_pose: true,
             },
-            mapper: MapperRunFlags { finish_steps: 250 },
+            mapper: MapperRunFlags {
+                finish_steps: 250,
+                finish_steps_per_keyframe: 4,
+            },
             consensus: ConsensusRunFlags {
                 ablation: vec![Ablation::NoPartDecay, Ablation::NoCounterPruning],
             },

@@ -75,8 +75,8 @@ pub struct BenchSlamArgs {
     /// Skip the fr2_desk teleport rows.
     #[arg(long)]
     no_teleport: bool,
-    /// Final optimisation steps of each run, as `opengs run --finish-steps` [default: 600;
-    /// --quick: 0].
+    /// Final optimisation steps of each run, as `opengs run --finish-steps` [default: `opengs
+    /// run`'s (600, more on the long teleport rows); --quick: 0].
     #[arg(long)]
     finish_steps: Option<usize>,
     /// Segmenter of each run (prior: ground truth, so mIoU measures the map, not the model).
@@ -135,6 +135,8 @@ struct Row {
     /// Frames reported lost.
     lost: Option<usize>,
     tracker_p99_ms: Option<f64>,
+    /// Steps the mapper's final optimisation ran (`mapper.json`; none without one).
+    final_steps: Option<usize>,
     /// Teleport rows: the first frame after the 12 s gap, and the frames lost from there
     /// until a verified pose (`None`: never relocalised).
     teleport_frame: Option<usize>,
@@ -165,7 +167,8 @@ pub fn run(args: BenchSlamArgs) -> anyhow::Result<()> {
         }
     });
     let frames = args.frames.unwrap_or(if quick { 150 } else { 600 });
-    let finish_steps = args.finish_steps.unwrap_or(if quick { 0 } else { 600 });
+    // Unset: `opengs run`'s default (which grows with the keyframes of a long row).
+    let finish_steps = args.finish_steps.or(if quick { Some(0) } else { None });
     anyhow::ensure!(frames >= 10, "--frames: at least 10 frames per case");
     anyhow::ensure!(!scenes.is_empty(), "--scenes: at least one scene");
     if scenes.contains(&0) {
@@ -222,7 +225,7 @@ pub fn run(args: BenchSlamArgs) -> anyhow::Result<()> {
     let load = std::fs::read_to_string("/proc/loadavg").unwrap_or_default();
     println!(
         "bench slam: {} cases ({} scenes × {} paths × {} noise settings{}), {frames} frames each, \
-         segmenter {}, finish steps {finish_steps}, {}, deploy {}; {}; loadavg {}",
+         segmenter {}, finish steps {}, {}, deploy {}; {}; loadavg {}",
         cases.len(),
         scenes.len(),
         paths.len(),
@@ -233,6 +236,7 @@ pub fn run(args: BenchSlamArgs) -> anyhow::Result<()> {
             ""
         },
         args.segmenter,
+        finish_steps.map_or("as opengs run's default".to_string(), |n| n.to_string()),
         args.max_rate
             .map_or("as recorded (30 Hz, gaps kept)".to_string(), |r| format!(
                 "max rate {r} Hz"
@@ -404,7 +408,7 @@ fn run_case(
     args: &BenchSlamArgs,
     opengs: &Path,
     trajectories: &[(PathKind, PathBuf); 2],
-    finish_steps: usize,
+    finish_steps: Option<usize>,
 ) -> anyhow::Result<Row> {
     let (data, frames, teleport_frame) = dataset(case, &args.out_root, trajectories)?;
     let slug = case.name.replace(' ', "_");
@@ -418,7 +422,6 @@ fn run_case(
         .arg("--dataset")
         .arg(format!("tum:{}", data.display()))
         .args(["--segmenter", &args.segmenter])
-        .args(["--finish-steps", &finish_steps.to_string()])
         .arg("--deploy")
         .arg(&args.deploy)
         .arg("--quiet")
@@ -427,6 +430,9 @@ fn run_case(
         .stdin(Stdio::null())
         .stdout(log.try_clone()?)
         .stderr(log);
+    if let Some(n) = finish_steps {
+        cmd.args(["--finish-steps", &n.to_string()]);
+    }
     if let Some(r) = args.max_rate {
         cmd.args(["--max-rate", &r.to_string()]);
     }
@@ -464,6 +470,8 @@ fn read_row(run_dir: &Path, frames: usize) -> anyhow::Result<Row> {
     };
     let m = read_json("metrics.json")?;
     let latency = read_json("latency.json")?;
+    // A mapper that wrote no map (a failed run) wrote no mapper.json either.
+    let mapper = read_json("mapper.json").unwrap_or_default();
     let f = |key: &str| m[key].as_f64();
     let verified = m["frames"].as_u64().map(|v| v as usize);
     let lost = m["frames_lost"].as_u64().map(|v| v as usize);
@@ -481,6 +489,9 @@ fn read_row(run_dir: &Path, frames: usize) -> anyhow::Result<Row> {
         tracker_p99_ms: latency["stages"]["tracker"]["p99_us"]
             .as_f64()
             .map(|us| us / 1e3),
+        final_steps: mapper["final_optimisation"]["iterations"]
+            .as_u64()
+            .map(|n| n as usize),
         ..Row::default()
     })
 }

@@ -17,6 +17,11 @@ const SYNTHETIC_REPLAY_HZ: f64 = 10.0;
 /// the map from 25.4 to 28.4 dB PSNR in about a minute on 2 idle cores).
 pub const DEFAULT_FINISH_STEPS: usize = 600;
 
+/// Without `--finish-steps`, a run with more keyframes than 600 steps cover at this rate gets
+/// this many per keyframe: 600 steps on the 225 keyframes of scene 4's whole fr2_desk loop left
+/// it at 26.8 dB; 4 per keyframe (900) reached 28.2, 6 (1350) 29.3, in 1.4× and 2× the time.
+pub const DEFAULT_FINISH_STEPS_PER_KEYFRAME: usize = 6;
+
 #[derive(clap::Args, Clone)]
 pub struct RunArgs {
     #[command(flatten)]
@@ -56,8 +61,9 @@ pub struct RunArgs {
     /// Full-resolution optimisation steps (with splitting) the mapper runs on its keyframes
     /// after the end of the data, before it writes map.ply: online it only affords
     /// half-resolution steps. About 0.1 s each at 640×480 on 2 idle cores; 0 skips them; Ctrl-C
-    /// during them keeps the map as it is. [default: 600; 0 in `opengs ablation`, which
-    /// scores labels only]
+    /// during them keeps the map as it is. A number given is the count; the default grows
+    /// with long runs. [default: 600, or 6 per kept keyframe past 100 keyframes; 0 in `opengs
+    /// ablation`, which scores labels only]
     #[arg(long)]
     pub finish_steps: Option<usize>,
     /// Score rendered views (PSNR/SSIM) against every Nth frame at the end; 0 skips it.
@@ -184,9 +190,7 @@ pub fn execute(args: &RunArgs) -> anyhow::Result<RunSummary> {
         tracker: TrackerRunFlags {
             gt_first_pose: args.gt_first_pose,
         },
-        mapper: MapperRunFlags {
-            finish_steps: if finish_after_data { finish_steps } else { 0 },
-        },
+        mapper: mapper_flags(args.finish_steps, finish_after_data),
         consensus: ConsensusRunFlags {
             ablation: args.ablation.clone(),
         },
@@ -333,4 +337,39 @@ fn print_summary(s: &RunSummary) {
         );
     }
     println!("outputs: {}", s.out_dir.display());
+}
+
+/// The mapper's final steps: a count given is kept as given; without one, 600 or
+/// [`DEFAULT_FINISH_STEPS_PER_KEYFRAME`] per kept keyframe, whichever is more.
+fn mapper_flags(finish_steps: Option<usize>, finish_after_data: bool) -> MapperRunFlags {
+    if !finish_after_data {
+        return MapperRunFlags::default();
+    }
+    MapperRunFlags {
+        finish_steps: finish_steps.unwrap_or(DEFAULT_FINISH_STEPS),
+        finish_steps_per_keyframe: match finish_steps {
+            None => DEFAULT_FINISH_STEPS_PER_KEYFRAME,
+            Some(_) => 0,
+        },
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn only_the_default_final_steps_grow_with_the_keyframes() {
+        let default = mapper_flags(None, true);
+        assert_eq!(
+            default.to_args(),
+            ["--finish-steps", "600", "--finish-steps-per-keyframe", "6"]
+        );
+        assert_eq!(
+            mapper_flags(Some(600), true).to_args(),
+            ["--finish-steps", "600"]
+        );
+        assert!(mapper_flags(Some(0), true).to_args().is_empty());
+        assert!(mapper_flags(None, false).to_args().is_empty());
+    }
 }
