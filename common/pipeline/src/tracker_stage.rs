@@ -383,9 +383,11 @@ fn log_outcome(seq: u64, out: &TrackOutcome) {
     }
     match (&out.failure, out.status) {
         (Some(why), _) => tracing::warn!("frame #{seq}: {:?} ({why})", out.status),
-        (None, TrackStatus::Relocalised) => {
-            tracing::warn!("frame #{seq}: relocalised (fitness {:.2})", out.fitness)
-        }
+        (None, TrackStatus::Relocalised) => tracing::warn!(
+            "frame #{seq}: relocalised (fitness {:.2}; from {})",
+            out.fitness,
+            out.relocalised.as_deref().unwrap_or("an unrecorded search")
+        ),
         _ => {}
     }
 }

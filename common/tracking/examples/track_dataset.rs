@@ -42,6 +42,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             lost += 1;
             println!("frame {i}: {:?} {why}", out.status);
         }
+        if let Some(how) = &out.relocalised {
+            println!("frame {i}: relocalised from {how}");
+        }
         if let (Some(g), true) = (f.gt_pose, out.status.has_pose()) {
             // Error against the ground truth aligned at the first frame.
             let align = *first.get_or_insert(g * out.pose.inverse());

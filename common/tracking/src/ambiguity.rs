@@ -134,6 +134,31 @@ pub(crate) fn choose(results: &[Scored], config: &SettleConfig) -> Option<Result
     })
 }
 
+/// How `results[best]` won, for the log: its score, and the best score of a pose apart from
+/// it (more than `distance` away), if any.
+pub(crate) fn describe_settled(results: &[Scored], best: usize, config: &SettleConfig) -> String {
+    let top = &results[best];
+    let rival = results
+        .iter()
+        .map(|r| (r, (top.pose.inverse() * r.pose).translation.vector.norm()))
+        .filter(|(_, apart)| *apart > config.distance)
+        .max_by(|a, b| a.0.score.total_cmp(&b.0.score));
+    match rival {
+        Some((r, apart)) => format!(
+            "settled: {:.3} of the frame on the model, {:.3} for a pose {:.1} cm away ({} results)",
+            top.score,
+            r.score,
+            apart * 100.0,
+            results.len()
+        ),
+        None => format!(
+            "settled: {:.3} of the frame on the model, no other pose among {} results",
+            top.score,
+            results.len()
+        ),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -207,16 +232,20 @@ mod tests {
         assert_eq!(s(&at(0.0, 0.03), 0.05), 0.0);
     }
 
-    #[test]
-    fn the_best_score_wins_unless_a_pose_apart_scores_as_well() {
-        let config = SettleConfig::default();
-        let at = |cm: f64, score: f64| Scored {
+    /// A result `cm` along x with `score`.
+    fn at(cm: f64, score: f64) -> Scored {
+        Scored {
             pose: Pose::from_parts(
                 Translation3::new(cm / 100.0, 0.0, 0.0),
                 UnitQuaternion::identity(),
             ),
             score,
-        };
+        }
+    }
+
+    #[test]
+    fn the_best_score_wins_unless_a_pose_apart_scores_as_well() {
+        let config = SettleConfig::default();
         // Scene 5 after the teleport (frame 761): the true pose over two 2.5 cm away.
         let clear = [
             at(0.0, 0.566),
@@ -233,5 +262,25 @@ mod tests {
         let why = choose(&valley, &config).unwrap().unwrap_err();
         assert!(why.contains("3.2 cm apart"), "{why}");
         assert_eq!(choose(&[], &config), None);
+    }
+
+    #[test]
+    fn a_settled_pose_is_described_by_its_score_and_its_best_rival_apart() {
+        let config = SettleConfig::default();
+        // The 1.2 cm neighbour is the same pose; of the two apart, the better scored is named.
+        let results = [
+            at(0.0, 0.781),
+            at(1.2, 0.78),
+            at(4.4, 0.767),
+            at(-3.0, 0.70),
+        ];
+        assert_eq!(
+            describe_settled(&results, 0, &config),
+            "settled: 0.781 of the frame on the model, 0.767 for a pose 4.4 cm away (4 results)"
+        );
+        assert_eq!(
+            describe_settled(&results[..2], 0, &config),
+            "settled: 0.781 of the frame on the model, no other pose among 2 results"
+        );
     }
 }

@@ -11,7 +11,7 @@ use opengs_gicp::{
     Registration, RegistrationConfig,
 };
 
-use crate::ambiguity::{choose, restarts, surface_fitness, Scored};
+use crate::ambiguity::{choose, describe_settled, restarts, surface_fitness, Scored};
 use crate::model::TrackingModel;
 use crate::motion::MAX_EXTRAPOLATION_S;
 use crate::verify::{verify, verify_visibility, MotionPrior, Rejection, VerifyConfig};
@@ -38,6 +38,12 @@ pub(crate) enum Attempt {
 
 /// A registration that passed (or failed) verification.
 pub(crate) type Verified = Result<Registration, String>;
+
+/// A relocalised pose and how it was found (for the log: which start, how it was settled).
+pub(crate) struct Found {
+    pub registration: Registration,
+    pub how: String,
+}
 
 /// The checks a registration must pass: relocalisation's stricter ones when no motion
 /// prior vouches for the answer, as after a gap beyond the motion model's horizon (scene 2
@@ -149,7 +155,7 @@ pub(crate) fn try_guesses(
     cloud: &Cloud,
     guesses: &[Pose],
     viewpoints: Option<&[Point3<f64>]>,
-) -> Verified {
+) -> Result<Found, String> {
     let mut last_failure = String::from("no relocalisation guesses");
     for guess in guesses {
         let Some(start) = screen_guess(model, config, frame, cloud, guess) else {
@@ -165,14 +171,29 @@ pub(crate) fn try_guesses(
             Attempt::Relocalise,
             None,
         );
+        let from = |r: &Registration| {
+            let d = guess.inverse() * r.transform;
+            format!(
+                "a guess {:.1} cm and {:.1}° away",
+                d.translation.vector.norm() * 100.0,
+                d.rotation.angle().to_degrees()
+            )
+        };
         // The spell's first attempt (the last verified pose, most often one frame after a
         // gap) is taken as it is; later ones may have landed anywhere.
         let found = match (found, viewpoints.is_some()) {
-            (Ok(r), true) => settle(model, config, frame, cloud, r, Attempt::Relocalise),
-            (found, _) => found,
+            (Ok(r), true) => {
+                let how = from(&r);
+                settle(model, config, frame, cloud, r, Attempt::Relocalise)
+                    .map(|(r, settled)| (r, format!("{how}, {settled}")))
+            }
+            (found, _) => found.map(|r| {
+                let how = from(&r);
+                (r, how)
+            }),
         };
         match found {
-            Ok(r) => return Ok(r),
+            Ok((registration, how)) => return Ok(Found { registration, how }),
             Err(why) => last_failure = why,
         }
     }
@@ -194,7 +215,7 @@ fn try_global(
     frame: &DepthFrame,
     cloud: &Cloud,
     viewpoints: &[Point3<f64>],
-) -> Verified {
+) -> Result<Found, String> {
     let global = &config.relocalise.global;
     let target = model.features(viewpoints, global);
     let source = FeatureCloud::new(cloud, |_| Point3::origin(), global);
@@ -217,15 +238,22 @@ fn try_global(
             }
         }
     }
+    let count = hypotheses.len();
     match best {
-        Some(r) => settle(model, config, frame, cloud, r, Attempt::Global),
+        Some(r) => settle(model, config, frame, cloud, r, Attempt::Global).map(
+            |(registration, settled)| Found {
+                registration,
+                how: format!("global registration ({count} hypotheses), {settled}"),
+            },
+        ),
         None => Err(last_failure),
     }
 }
 
 /// A relocalised pose settled ([`crate::ambiguity`]): fine restarts a step either way
 /// along its two weakest translations, every verified result scored by the share of the
-/// frame lying on the model's surfaces; the best, or `Err` when the view does not choose.
+/// frame lying on the model's surfaces; the best and how it won, or `Err` when the view
+/// does not choose.
 fn settle(
     model: &TrackingModel,
     config: &TrackerConfig,
@@ -233,10 +261,10 @@ fn settle(
     cloud: &Cloud,
     found: Registration,
     kind: Attempt,
-) -> Verified {
+) -> Result<(Registration, String), String> {
     let settling = &config.relocalise.settle;
     if settling.step <= 0.0 {
-        return Ok(found);
+        return Ok((found, "not settled".into()));
     }
     let target = model.target().fine();
     let reach = config.registration.max_correspondence_distance;
@@ -256,7 +284,10 @@ fn settle(
         })
         .collect();
     match choose(&scored, settling) {
-        Some(Ok(best)) => Ok(results.swap_remove(best)),
+        Some(Ok(best)) => {
+            let how = describe_settled(&scored, best, settling);
+            Ok((results.swap_remove(best), how))
+        }
         Some(Err(why)) => Err(why),
         None => Err("no result to settle".into()),
     }
@@ -310,7 +341,7 @@ mod tests {
             UnitQuaternion::identity(),
         );
         let found = register_verified(&model, &c, &frame, &cloud, &aside, Attempt::Global, None)?;
-        settle(&model, &c, &frame, &cloud, found, Attempt::Global)
+        settle(&model, &c, &frame, &cloud, found, Attempt::Global).map(|(r, _)| r)
     }
 
     #[test]

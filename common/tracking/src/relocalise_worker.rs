@@ -12,9 +12,9 @@ use std::thread::JoinHandle;
 
 use opengs_geometry::nalgebra::Point3;
 use opengs_geometry::{Intrinsics, Pose};
-use opengs_gicp::{Cloud, Registration};
+use opengs_gicp::Cloud;
 
-use crate::attempt::try_guesses;
+use crate::attempt::{try_guesses, Found};
 use crate::model::TrackingModel;
 use crate::{DepthFrame, TrackerConfig};
 
@@ -38,7 +38,7 @@ pub(crate) struct GuessAnswer {
     pub spell: u64,
     /// The job's frame time: a verified pose is where the camera was then.
     pub timestamp: f64,
-    pub result: Result<Registration, String>,
+    pub result: Result<Found, String>,
 }
 
 /// The relocalisation thread and the one job it may be working on.
