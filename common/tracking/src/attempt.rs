@@ -243,7 +243,10 @@ fn try_global(
         Some(r) => settle(model, config, frame, cloud, r, Attempt::Global).map(
             |(registration, settled)| Found {
                 registration,
-                how: format!("global registration ({count} hypotheses), {settled}"),
+                how: format!(
+                    "global registration ({count} hypothes{}), {settled}",
+                    if count == 1 { "is" } else { "es" }
+                ),
             },
         ),
         None => Err(last_failure),
