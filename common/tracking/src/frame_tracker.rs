@@ -20,9 +20,7 @@
 //! ([`crate::Relocaliser`]; from the spell's second attempt on, global registration's
 //! hypotheses too) is tried every 0.15 s until one verifies: in the pipeline on
 //! a thread of its own ([`crate::relocalise_worker`]), so a lost frame costs what a
-//! tracked one does. A pose found from the spell's second attempt on is a claim: tracked
-//! on while its frames stay lost (reported where it puts them), it ends the spell when the
-//! search on the next view due, run on its own, verifies no pose elsewhere ([`Claim`]). Until ten frames after the start are verified, the start does not
+//! tracked one does. Until ten frames after the start are verified, the start does not
 //! stand: a frame that fails starts tracking again at itself instead of being lost
 //! ([`TrackOutcome::started_again`]), and the frames since the start given up have no pose.
 
@@ -36,7 +34,7 @@ use opengs_gicp::{
 };
 
 use crate::ambiguity::restarts;
-use crate::attempt::{register_verified, try_guesses, Attempt, Found, Verified};
+use crate::attempt::{register_verified, try_guesses, Attempt, Verified};
 use crate::model::{MapGaussians, ModelBuilder, ModelUpdate, TrackingModel};
 use crate::relocalise_worker::{GuessJob, RelocaliseWorker};
 use crate::verify::MotionPrior;
@@ -116,7 +114,7 @@ pub struct TrackOutcome {
     pub wide_search: Option<String>,
     /// Tracking started again at this frame (status `Initial`): the start it replaces.
     pub started_again: Option<StartedAgain>,
-    /// How a relocalised frame's pose was found (status `Relocalised`).
+    /// How a relocalised frame's pose was found (status `Relocalised`), for the log.
     pub relocalised: Option<String>,
 }
 
@@ -192,25 +190,6 @@ struct LostSpell {
     last_failure: Option<String>,
     /// Relocalisation attempts so far.
     attempts: u32,
-    /// An answer found on one view, waiting for a second view to agree.
-    claim: Option<Claim>,
-}
-
-/// A relocalised pose found on one view and tracked on from it, frame by frame, while the
-/// frames stay lost: a single view after a teleport can be answered centimetres off
-/// (scene 1 along fr2_desk: 2.6 cm, settled by 0.781 against 0.767 for a pose 4.4 cm away),
-/// and the map built on it keeps the offset. The next view due is searched on its own (not
-/// from the claim): a pose it verifies more than [`crate::SettleConfig::distance`] from
-/// where the claim put that view becomes the claim instead; one within it, or none, lets
-/// the claim stand. (Requiring a verified agreement let a right claim wait 20 s on scene 3,
-/// tracker alone, where searches rarely verify.)
-#[derive(Debug, Clone)]
-struct Claim {
-    /// The frame (its time) the answer was found on, and how.
-    found_at: f64,
-    how: String,
-    /// The frame given to a search while the claim held, and where the claim put it.
-    checking: Option<(f64, Pose)>,
 }
 
 /// Tracks frames against a model of the map (or of its own keyframes before there is one).
@@ -244,14 +223,6 @@ pub struct FrameTracker {
     /// was kept, or the tracker went on from a predecessor). Until then a lost frame starts
     /// again.
     start_stands: bool,
-}
-
-/// What a relocalisation answer did to the spell's claim.
-enum Weighed {
-    /// It landed where the claim put its view: this frame's registration, and how.
-    Stands(Registration, String),
-    /// It is the claim now, tracked on to this frame (`None`: it did not track).
-    Claimed(Option<Registration>),
 }
 
 /// Where a registration from the prediction landed, by its offset from the prediction.
@@ -576,48 +547,8 @@ impl FrameTracker {
         gap: bool,
     ) -> TrackOutcome {
         let timestamp = frame.timestamp;
-        let Some((last, _)) = self.motion.last() else {
-            return self.lose(cloud, "no verified pose yet".into());
-        };
-        let (attempt, wide) = self.register_from_prior(frame, &cloud, gap);
-        match attempt {
-            Ok(r) => TrackOutcome {
-                wide_search: wide,
-                ..self.accept(index, timestamp, cloud, &r, TrackStatus::Tracked)
-            },
-            Err(why) if !self.start_stands => self.start_again(index, timestamp, cloud, why),
-            Err(why) => {
-                self.spells += 1;
-                self.lost = Some(LostSpell {
-                    id: self.spells,
-                    since: index,
-                    last_attempt: timestamp,
-                    last_failure: None,
-                    attempts: 0,
-                    relocaliser: Relocaliser::start(
-                        &last,
-                        &self.keyframe_poses,
-                        &self.config.relocalise,
-                    ),
-                    claim: None,
-                });
-                self.motion.stop();
-                self.lose(cloud, format!("tracking lost: {why}"))
-            }
-        }
-    }
-
-    /// The registration [`Self::track_from_prior`] verifies for a frame, and why the wide
-    /// search ran, if it did; nothing is changed.
-    fn register_from_prior(
-        &self,
-        frame: &DepthFrame,
-        cloud: &Cloud,
-        gap: bool,
-    ) -> (Verified, Option<String>) {
-        let timestamp = frame.timestamp;
         let Some((last, t_last)) = self.motion.last() else {
-            return (Err("no verified pose yet".into()), None);
+            return self.lose(cloud, "no verified pose yet".into());
         };
         let predicted = self.motion.predict(timestamp).unwrap_or(last);
         // Without a velocity (the frame after the first, after a relocalisation or a
@@ -685,7 +616,7 @@ impl FrameTracker {
             }
             let full = matches!(kind, Attempt::Fast | Attempt::Turned);
             let source = match full {
-                true => cloud,
+                true => &cloud,
                 false => {
                     thin.get_or_insert_with(|| cloud.voxel_subsample(self.config.wide_source_voxel))
                 }
@@ -735,7 +666,7 @@ impl FrameTracker {
                 best = Some(
                     self.register_verified(
                         frame,
-                        cloud,
+                        &cloud,
                         &from.transform,
                         Attempt::Polish,
                         Some(&prior),
@@ -747,7 +678,30 @@ impl FrameTracker {
         if let Some(r) = best {
             attempt = Ok(r);
         }
-        (attempt, wide)
+        match attempt {
+            Ok(r) => TrackOutcome {
+                wide_search: wide,
+                ..self.accept(index, timestamp, cloud, &r, TrackStatus::Tracked)
+            },
+            Err(why) if !self.start_stands => self.start_again(index, timestamp, cloud, why),
+            Err(why) => {
+                self.spells += 1;
+                self.lost = Some(LostSpell {
+                    id: self.spells,
+                    since: index,
+                    last_attempt: timestamp,
+                    last_failure: None,
+                    attempts: 0,
+                    relocaliser: Relocaliser::start(
+                        &last,
+                        &self.keyframe_poses,
+                        &self.config.relocalise,
+                    ),
+                });
+                self.motion.stop();
+                self.lose(cloud, format!("tracking lost: {why}"))
+            }
+        }
     }
 
     /// Lost before the start stands: a moment's views are all the model holds, and a camera
@@ -778,44 +732,41 @@ impl FrameTracker {
         out
     }
 
-    /// Lost: a few relocalisation guesses every `attempt_every_s`. An answer ends the
-    /// spell at once only on its first attempt (the last verified pose, most often one frame
-    /// after a gap); a later one, which may have landed anywhere, is a [`Claim`] until a
-    /// second view agrees. Inline, the guesses are tried on this frame; with the
+    /// Lost: a few relocalisation guesses every `attempt_every_s`; the first that
+    /// verifies ends the spell. Inline, the guesses are tried on this frame; with the
     /// relocalisation thread, on an earlier lost frame while this one is reported lost at
-    /// once, and an answer puts the camera where that frame was: the claim is tracked on
-    /// from there.
+    /// once, and a verified answer puts the camera where that frame was: this frame is
+    /// tracked from there as after a gap.
     fn relocalise(&mut self, frame: &DepthFrame, index: u64, cloud: Cloud) -> TrackOutcome {
         let timestamp = frame.timestamp;
-        let Some(id) = self.lost.as_ref().map(|s| s.id) else {
+        let Some(spell) = self.lost.as_mut() else {
             return self.track_from_prior(frame, index, cloud, true);
         };
-        // The claim, tracked on to this frame.
-        let mut claimed = self.track_claim(frame, &cloud);
+        let id = spell.id;
         if let Some(answer) = self.worker.as_mut().and_then(|w| w.answer(id)) {
             match answer.result {
                 Ok(found) => {
-                    match self.weigh_answer(frame, &cloud, found, answer.timestamp, &claimed) {
-                        Weighed::Stands(r, how) => {
-                            return self.confirm(index, timestamp, cloud, (r, how))
-                        }
-                        Weighed::Claimed(tracked) => claimed = tracked,
+                    self.lost = None;
+                    let answer_pose = found.registration.transform;
+                    self.motion.update(answer_pose, answer.timestamp);
+                    let mut out = self.track_from_prior(frame, index, cloud, true);
+                    if out.status == TrackStatus::Tracked {
+                        out.status = TrackStatus::Relocalised;
+                        let moved = answer_pose.inverse() * out.pose;
+                        out.relocalised = Some(format!(
+                            "{} on the view {:.2} s before; this frame {:.1} cm and {:.1}° from it",
+                            found.how,
+                            timestamp - answer.timestamp,
+                            moved.translation.vector.norm() * 100.0,
+                            moved.rotation.angle().to_degrees()
+                        ));
                     }
+                    return out;
                 }
-                Err(why) => {
-                    if let Some(c) = self.unchallenged(timestamp, answer.timestamp, &claimed) {
-                        return self.confirm(index, timestamp, cloud, c);
-                    }
-                    if let Some(spell) = self.lost.as_mut() {
-                        spell.last_failure = Some(why);
-                    }
-                }
+                Err(why) => spell.last_failure = Some(why),
             }
         }
         let busy = self.worker.as_ref().is_some_and(RelocaliseWorker::is_busy);
-        let Some(spell) = self.lost.as_mut() else {
-            return self.lose(cloud, "lost".into());
-        };
         let due = timestamp - spell.last_attempt >= self.config.relocalise.attempt_every_s;
         if due && !busy {
             if let Some(model) = self.model.clone() {
@@ -842,21 +793,12 @@ impl FrameTracker {
                             model: Arc::clone(&model),
                         })
                     });
-                if submitted {
-                    if let (Some(claim), Some(r)) = (spell.claim.as_mut(), &claimed) {
-                        claim.checking = Some((timestamp, r.transform));
-                    }
-                } else {
+                if !submitted {
                     // Global registration (a few hundred ms) never on the spell's first
                     // attempt, which most often ends the spell.
                     let viewpoints = (!first).then(|| spell.relocaliser.viewpoints());
-                    let found =
-                        try_guesses(&model, &self.config, frame, &cloud, &guesses, viewpoints);
-                    if let Some(claim) = spell.claim.as_mut() {
-                        claim.checking = claimed.as_ref().map(|r| (timestamp, r.transform));
-                    }
-                    match found {
-                        Ok(found) if first => {
+                    match try_guesses(&model, &self.config, frame, &cloud, &guesses, viewpoints) {
+                        Ok(found) => {
                             self.lost = None;
                             return TrackOutcome {
                                 relocalised: Some(found.how),
@@ -869,148 +811,19 @@ impl FrameTracker {
                                 )
                             };
                         }
-                        Ok(found) => {
-                            match self.weigh_answer(frame, &cloud, found, timestamp, &claimed) {
-                                Weighed::Stands(r, how) => {
-                                    return self.confirm(index, timestamp, cloud, (r, how))
-                                }
-                                Weighed::Claimed(tracked) => claimed = tracked,
-                            }
-                        }
-                        Err(why) => {
-                            if let Some(c) = self.unchallenged(timestamp, timestamp, &claimed) {
-                                return self.confirm(index, timestamp, cloud, c);
-                            }
-                            if let Some(spell) = self.lost.as_mut() {
-                                spell.last_failure = Some(why);
-                            }
-                        }
+                        Err(why) => spell.last_failure = Some(why),
                     }
                 }
             }
         }
-        let Some(spell) = self.lost.as_ref() else {
-            return self.lose(cloud, "lost".into());
-        };
-        let lost_for = index - spell.since + 1;
-        let why = match (&spell.claim, &spell.last_failure) {
-            (Some(claim), _) if claimed.is_some() => format!(
-                "lost for {lost_for} frames; relocalised on the view {:.2} s before ({}), \
-                 waiting for the search on a later view",
-                timestamp - claim.found_at,
-                claim.how
+        let why = match &spell.last_failure {
+            Some(f) => format!(
+                "lost for {} frames; relocalisation: {f}",
+                index - spell.since + 1
             ),
-            (_, Some(f)) => format!("lost for {lost_for} frames; relocalisation: {f}"),
-            (_, None) => format!("lost for {lost_for} frames"),
+            None => format!("lost for {} frames", index - spell.since + 1),
         };
         self.lose(cloud, why)
-    }
-
-    /// The spell's claim tracked on to this frame (the motion model follows it); a claim
-    /// that fails to track is dropped.
-    fn track_claim(&mut self, frame: &DepthFrame, cloud: &Cloud) -> Option<Registration> {
-        self.lost.as_ref()?.claim.as_ref()?;
-        let gap = !self.motion.has_velocity();
-        match self.register_from_prior(frame, cloud, gap).0 {
-            Ok(r) => {
-                self.motion.update(r.transform, frame.timestamp);
-                Some(r)
-            }
-            Err(why) => {
-                if let Some(spell) = self.lost.as_mut() {
-                    spell.claim = None;
-                    spell.last_failure =
-                        Some(format!("a relocalised pose tracked on failed: {why}"));
-                }
-                self.motion.stop();
-                None
-            }
-        }
-    }
-
-    /// A relocalisation answer found on the frame at `found_at`: the claim stands when it
-    /// lands where the claim put that frame; otherwise it becomes the claim, tracked on to
-    /// this frame.
-    fn weigh_answer(
-        &mut self,
-        frame: &DepthFrame,
-        cloud: &Cloud,
-        found: Found,
-        found_at: f64,
-        claimed: &Option<Registration>,
-    ) -> Weighed {
-        let agree = self.config.relocalise.settle.distance;
-        let answer = found.registration.transform;
-        let Some(spell) = self.lost.as_mut() else {
-            return Weighed::Claimed(None);
-        };
-        let checked = spell.claim.as_ref().and_then(|c| {
-            c.checking
-                .filter(|(t, _)| *t == found_at)
-                .map(|(_, p)| (c, p))
-        });
-        if let (Some((claim, pose)), Some(r)) = (checked, claimed) {
-            let apart = (pose.inverse() * answer).translation.vector.norm();
-            if apart <= agree {
-                let how = format!(
-                    "{} on the view {:.2} s before this frame; the view {:.2} s after it, \
-                     searched on its own, landed {:.1} cm from it ({})",
-                    claim.how,
-                    frame.timestamp - claim.found_at,
-                    found_at - claim.found_at,
-                    apart * 100.0,
-                    found.how
-                );
-                return Weighed::Stands(r.clone(), how);
-            }
-        }
-        spell.claim = Some(Claim {
-            found_at,
-            how: found.how,
-            checking: None,
-        });
-        self.motion.stop();
-        self.motion.update(answer, found_at);
-        if found_at == frame.timestamp {
-            return Weighed::Claimed(Some(found.registration));
-        }
-        Weighed::Claimed(self.track_claim(frame, cloud))
-    }
-
-    /// The claim stands when the search on the view it was checked with (at `searched`)
-    /// verified nothing: this frame's registration, tracked on from it, and how.
-    fn unchallenged(
-        &self,
-        now: f64,
-        searched: f64,
-        claimed: &Option<Registration>,
-    ) -> Option<(Registration, String)> {
-        let claim = self.lost.as_ref()?.claim.as_ref()?;
-        let r = claimed.as_ref()?;
-        claim.checking.filter(|(t, _)| *t == searched)?;
-        let how = format!(
-            "{} on the view {:.2} s before this frame; the view {:.2} s after it, searched on \
-             its own, verified no other pose",
-            claim.how,
-            now - claim.found_at,
-            searched - claim.found_at
-        );
-        Some((r.clone(), how))
-    }
-
-    /// A claim confirmed: the spell ends and this frame, tracked on from it, is relocalised.
-    fn confirm(
-        &mut self,
-        index: u64,
-        timestamp: f64,
-        cloud: Cloud,
-        (r, how): (Registration, String),
-    ) -> TrackOutcome {
-        self.lost = None;
-        TrackOutcome {
-            relocalised: Some(how),
-            ..self.accept(index, timestamp, cloud, &r, TrackStatus::Relocalised)
-        }
     }
 
     /// Registration of `kind` from `guess` against the model in use, then verification.

@@ -4,8 +4,7 @@
 //! (p99 63–83 ms against 22–39 ms on every other row). The worker tries one lost frame's
 //! guesses at a time on a thread of its own, against the model of that moment (shared,
 //! not copied); the tracker reports each lost frame at once and, when a guess has
-//! verified, tracks the frame in hand on from that pose (a claim, until the search on a
-//! later view lets it stand).
+//! verified, tracks the frame in hand from that pose.
 
 use std::sync::mpsc::{channel, Receiver, Sender};
 use std::sync::Arc;
