@@ -171,29 +171,33 @@ pub(crate) fn try_guesses(
             Attempt::Relocalise,
             None,
         );
-        let from = |r: &Registration| {
-            let d = guess.inverse() * r.transform;
-            format!(
+        // The spell's first attempt (the last verified pose, most often one frame after a
+        // gap) is taken as it is; later ones may have landed anywhere.
+        let found = found.and_then(|registration| {
+            let d = guess.inverse() * registration.transform;
+            let how = format!(
                 "a guess {:.1} cm and {:.1}° away",
                 d.translation.vector.norm() * 100.0,
                 d.rotation.angle().to_degrees()
-            )
-        };
-        // The spell's first attempt (the last verified pose, most often one frame after a
-        // gap) is taken as it is; later ones may have landed anywhere.
-        let found = match (found, viewpoints.is_some()) {
-            (Ok(r), true) => {
-                let how = from(&r);
-                settle(model, config, frame, cloud, r, Attempt::Relocalise)
-                    .map(|(r, settled)| (r, format!("{how}, {settled}")))
+            );
+            match viewpoints {
+                Some(_) => settle(
+                    model,
+                    config,
+                    frame,
+                    cloud,
+                    registration,
+                    Attempt::Relocalise,
+                )
+                .map(|(registration, settled)| Found {
+                    registration,
+                    how: format!("{how}, {settled}"),
+                }),
+                None => Ok(Found { registration, how }),
             }
-            (found, _) => found.map(|r| {
-                let how = from(&r);
-                (r, how)
-            }),
-        };
+        });
         match found {
-            Ok((registration, how)) => return Ok(Found { registration, how }),
+            Ok(found) => return Ok(found),
             Err(why) => last_failure = why,
         }
     }
