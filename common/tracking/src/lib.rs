@@ -10,6 +10,7 @@ mod attempt;
 mod config;
 mod depth_weight;
 mod frame_tracker;
+mod from_prior;
 pub mod idle_time;
 mod model;
 mod motion;
