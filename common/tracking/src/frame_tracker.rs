@@ -20,7 +20,8 @@
 //! ([`crate::Relocaliser`]; from the spell's second attempt on, global registration's
 //! hypotheses too) is tried every 0.15 s until one verifies: in the pipeline on
 //! a thread of its own ([`crate::relocalise_worker`]), so a lost frame costs what a
-//! tracked one does. Until ten frames after the start are verified, the start does not
+//! tracked one does, and there a found pose is tracked on over the lost frames for a
+//! second, no keyframe taken, before it ends the spell. Until ten frames after the start are verified, the start does not
 //! stand: a frame that fails starts tracking again at itself instead of being lost
 //! ([`TrackOutcome::started_again`]), and the frames since the start given up have no pose.
 
@@ -578,8 +579,9 @@ impl FrameTracker {
     /// Lost: a few relocalisation guesses every `attempt_every_s`; the first that
     /// verifies ends the spell. Inline, the guesses are tried on this frame; with the
     /// relocalisation thread, on an earlier lost frame while this one is reported lost at
-    /// once, and a verified answer puts the camera where that frame was: this frame is
-    /// tracked from there as after a gap.
+    /// once (and handed over, while a job is out, for the thread to track a found pose on),
+    /// and an answer puts the camera where the last frame it was tracked on to was: this
+    /// frame is tracked from there with the velocity it was tracked on with.
     fn relocalise(&mut self, frame: &DepthFrame, index: u64, cloud: Cloud) -> TrackOutcome {
         let timestamp = frame.timestamp;
         let Some(spell) = self.lost.as_mut() else {
