@@ -20,8 +20,8 @@
 //! ([`crate::Relocaliser`]; from the spell's second attempt on, global registration's
 //! hypotheses too) is tried every 0.15 s until one verifies: in the pipeline on
 //! a thread of its own ([`crate::relocalise_worker`]), so a lost frame costs what a
-//! tracked one does, and there a found pose is tracked on over the lost frames for a
-//! second, no keyframe taken, before it ends the spell. Until ten frames after the start are verified, the start does not
+//! tracked one does, and there a found pose is tracked on over the lost frames for
+//! 1.5 s, no keyframe taken, before it ends the spell. Until ten frames after the start are verified, the start does not
 //! stand: a frame that fails starts tracking again at itself instead of being lost
 //! ([`TrackOutcome::started_again`]), and the frames since the start given up have no pose.
 

@@ -43,7 +43,8 @@ pub struct RelocaliseConfig {
     /// the view does not determine it ([`crate::ambiguity`]).
     pub settle: SettleConfig,
     /// A pose found off the tracking path is tracked on over the lost frames for this long
-    /// (s) before it ends the spell ([`crate::relocalise_worker`]) …
+    /// (s) before it ends the spell ([`crate::relocalise_worker`]) … Scene 1's teleport: poses
+    /// found 2.84 and 2.67 cm off came within 0.3 cm 0.70 and 0.83 s on.
     pub track_on_s: f64,
     /// … or until a view fits less of the model than this: with no keyframe added, a camera
     /// moving on leaves the map behind (the fitness fell 0.70 → 0.50 over 0.9 s in
@@ -79,7 +80,7 @@ impl Default for RelocaliseConfig {
                 ..VerifyConfig::default()
             },
             settle: SettleConfig::default(),
-            track_on_s: 1.0,
+            track_on_s: 1.5,
             track_on_min_fitness: 0.6,
         }
     }
