@@ -368,12 +368,12 @@ mod tests {
     }
 
     #[test]
-    fn a_found_pose_is_tracked_on_in_steps_within_the_wide_search_interval() {
+    fn a_found_pose_is_tracked_on_to_the_newest_frame_within_each_step() {
         let (slot, model) = (Slot::default(), model());
         for k in 0..20 {
             hand_over(&slot, frame(1, k, &model));
         }
-        // From the search's view (frame 0): the newest within 0.25 s (7.5 frames) is 6.
+        // Steps of 0.25 s: from the search's view (frame 0), the newest within 7.5 frames is 6.
         let take = |after: usize| {
             next_frame(&slot, 1, after as f64 / 30.0, 0.25)
                 .map(|(f, newest)| ((f.timestamp * 30.0).round() as usize, newest))
