@@ -616,15 +616,7 @@ impl FrameTracker {
         }
         let busy = self.worker.as_ref().is_some_and(RelocaliseWorker::is_busy);
         if let (true, Some(worker), Some(model)) = (busy, &self.worker, &self.model) {
-            worker.offer(LostFrame {
-                spell: id,
-                timestamp,
-                depth: frame.depth.to_vec(),
-                depth_scale: frame.depth_scale,
-                intrinsics: *frame.intrinsics,
-                cloud: cloud.clone(),
-                model: Arc::clone(model),
-            });
+            worker.offer(LostFrame::new(id, frame, &cloud, model));
         }
         let due = timestamp - spell.last_attempt >= self.config.relocalise.attempt_every_s;
         if due && !busy {
@@ -641,15 +633,9 @@ impl FrameTracker {
                 let submitted = !first
                     && self.worker.as_mut().is_some_and(|w| {
                         w.submit(GuessJob {
-                            spell: id,
-                            timestamp,
-                            depth: frame.depth.to_vec(),
-                            depth_scale: frame.depth_scale,
-                            intrinsics: *frame.intrinsics,
-                            cloud: cloud.clone(),
+                            frame: LostFrame::new(id, frame, &cloud, &model),
                             guesses: guesses.clone(),
                             viewpoints: spell.relocaliser.viewpoints().to_vec(),
-                            model: Arc::clone(&model),
                         })
                     });
                 if !submitted {

@@ -32,6 +32,15 @@ use crate::{ConstantVelocity, DepthFrame, TrackerConfig};
 
 /// One lost frame and the guesses to try for it.
 pub(crate) struct GuessJob {
+    pub frame: LostFrame,
+    pub guesses: Vec<Pose>,
+    /// Where the keyframes were taken: global registration runs when the guesses fail.
+    pub viewpoints: Vec<Point3<f64>>,
+}
+
+/// A lost frame with the model of its moment: a job's, or one handed over while a job is
+/// out, to track a found pose on.
+pub(crate) struct LostFrame {
     /// The lost spell it belongs to (answers from an ended spell are dropped).
     pub spell: u64,
     pub timestamp: f64,
@@ -39,21 +48,36 @@ pub(crate) struct GuessJob {
     pub depth_scale: f64,
     pub intrinsics: Intrinsics,
     pub cloud: Cloud,
-    pub guesses: Vec<Pose>,
-    /// Where the keyframes were taken: global registration runs when the guesses fail.
-    pub viewpoints: Vec<Point3<f64>>,
     pub model: Arc<TrackingModel>,
 }
 
-/// A lost frame handed over while a job is out, to track a found pose on.
-pub(crate) struct LostFrame {
-    pub spell: u64,
-    pub timestamp: f64,
-    pub depth: Vec<u16>,
-    pub depth_scale: f64,
-    pub intrinsics: Intrinsics,
-    pub cloud: Cloud,
-    pub model: Arc<TrackingModel>,
+impl LostFrame {
+    /// A copy of `frame` (the tracker's buffer is not kept) and its source cloud.
+    pub(crate) fn new(
+        spell: u64,
+        frame: &DepthFrame,
+        cloud: &Cloud,
+        model: &Arc<TrackingModel>,
+    ) -> Self {
+        Self {
+            spell,
+            timestamp: frame.timestamp,
+            depth: frame.depth.to_vec(),
+            depth_scale: frame.depth_scale,
+            intrinsics: *frame.intrinsics,
+            cloud: cloud.clone(),
+            model: Arc::clone(model),
+        }
+    }
+
+    fn depth_frame(&self) -> DepthFrame<'_> {
+        DepthFrame {
+            depth: &self.depth,
+            depth_scale: self.depth_scale,
+            intrinsics: &self.intrinsics,
+            timestamp: self.timestamp,
+        }
+    }
 }
 
 /// What the guesses of one job came to.
@@ -172,30 +196,25 @@ impl Drop for RelocaliseWorker {
 
 /// The guesses of one job, and a found pose tracked on.
 fn answer_job(job: &GuessJob, config: &TrackerConfig, slot: &Slot) -> GuessAnswer {
-    let frame = DepthFrame {
-        depth: &job.depth,
-        depth_scale: job.depth_scale,
-        intrinsics: &job.intrinsics,
-        timestamp: job.timestamp,
-    };
+    let lost = &job.frame;
     let found = try_guesses(
-        &job.model,
+        &lost.model,
         config,
-        &frame,
-        &job.cloud,
+        &lost.depth_frame(),
+        &lost.cloud,
         &job.guesses,
         Some(&job.viewpoints),
     );
     let mut motion = ConstantVelocity::default();
     let (timestamp, result) = match found {
         Ok(found) => {
-            motion.update(found.registration.transform, job.timestamp);
+            motion.update(found.registration.transform, job.frame.timestamp);
             track_on(found, job, config, slot, &mut motion)
         }
-        Err(why) => (job.timestamp, Err(why)),
+        Err(why) => (job.frame.timestamp, Err(why)),
     };
     GuessAnswer {
-        spell: job.spell,
+        spell: job.frame.spell,
         timestamp,
         result,
         motion,
@@ -234,22 +253,17 @@ fn track_on(
     motion: &mut ConstantVelocity,
 ) -> (f64, Result<Found, String>) {
     let how = found.how;
-    let mut at = job.timestamp;
+    let mut at = job.frame.timestamp;
     let mut views = 0;
     let step = VELOCITY_BASELINE_S;
     let registration = loop {
-        let Some((next, newest)) = next_frame(slot, job.spell, at, step) else {
+        let Some((next, newest)) = next_frame(slot, job.frame.spell, at, step) else {
             return (
                 at,
                 Err(format!("{how}; no later lost view came to track it on")),
             );
         };
-        let frame = DepthFrame {
-            depth: &next.depth,
-            depth_scale: next.depth_scale,
-            intrinsics: &next.intrinsics,
-            timestamp: next.timestamp,
-        };
+        let frame = next.depth_frame();
         let gap = next.timestamp - at > config.wide_search_after_s;
         let r = match from_prior::register(&next.model, config, motion, &frame, &next.cloud, gap).0
         {
@@ -260,7 +274,7 @@ fn track_on(
                     Err(format!(
                         "{how}; tracked on over {views} views, then the view {:.2} s after it \
                          failed: {why}",
-                        next.timestamp - job.timestamp
+                        next.timestamp - job.frame.timestamp
                     )),
                 )
             }
@@ -270,13 +284,13 @@ fn track_on(
         views += 1;
         // A view that fits little of the model is leaving it: the map must grow to follow.
         let leaving = r.fitness < config.relocalise.track_on_min_fitness;
-        if leaving || (newest && at - job.timestamp >= config.relocalise.track_on_s) {
+        if leaving || (newest && at - job.frame.timestamp >= config.relocalise.track_on_s) {
             break r;
         }
     };
     let how = format!(
         "{how}; tracked on over {views} later views for {:.2} s",
-        at - job.timestamp
+        at - job.frame.timestamp
     );
     (at, Ok(Found { registration, how }))
 }
