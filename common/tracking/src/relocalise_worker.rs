@@ -208,13 +208,13 @@ fn answer_job(job: &GuessJob, config: &TrackerConfig, slot: &Slot) -> GuessAnswe
     let mut motion = ConstantVelocity::default();
     let (timestamp, result) = match found {
         Ok(found) => {
-            motion.update(found.registration.transform, job.frame.timestamp);
+            motion.update(found.registration.transform, lost.timestamp);
             track_on(found, job, config, slot, &mut motion)
         }
-        Err(why) => (job.frame.timestamp, Err(why)),
+        Err(why) => (lost.timestamp, Err(why)),
     };
     GuessAnswer {
-        spell: job.frame.spell,
+        spell: lost.spell,
         timestamp,
         result,
         motion,
